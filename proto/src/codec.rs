@@ -1,0 +1,204 @@
+//! The one encoder and the one decoder of spwi messages.
+//!
+//! Layout: `version: u16` then the message, both bincode 2 (serde mode, standard
+//! config: little-endian, varint lengths). The version is read first so that a peer
+//! running another protocol is told apart from garbage. Decoding is bounded by
+//! [`MAX_MESSAGE_BYTES`] before anything is allocated, refuses trailing bytes, and
+//! validates the result ([`Validate`]).
+
+use crate::id::RobotId;
+use crate::messages::*;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+/// Bumped on every incompatible change of any payload.
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// Largest message accepted. A full detection frame (64 objects × 512 floats) is
+/// about 135 KB.
+pub const MAX_MESSAGE_BYTES: usize = 256 * 1024;
+
+type Config = bincode::config::Configuration<
+    bincode::config::LittleEndian,
+    bincode::config::Varint,
+    bincode::config::Limit<MAX_MESSAGE_BYTES>,
+>;
+
+const CONFIG: Config = bincode::config::standard().with_limit::<MAX_MESSAGE_BYTES>();
+
+/// A payload that travels on one of the keys of [`crate::keys`].
+pub trait Message: Serialize + DeserializeOwned + Validate {
+    /// Name used in errors, logs and metrics.
+    const KIND: &'static str;
+    /// The robot the payload claims to come from, if it names one.
+    fn robot(&self) -> Option<&RobotId>;
+}
+
+macro_rules! message {
+    ($t:ty, $kind:literal, robot) => {
+        impl Message for $t {
+            const KIND: &'static str = $kind;
+            fn robot(&self) -> Option<&RobotId> {
+                Some(&self.robot)
+            }
+        }
+    };
+    ($t:ty, $kind:literal) => {
+        impl Message for $t {
+            const KIND: &'static str = $kind;
+            fn robot(&self) -> Option<&RobotId> {
+                None
+            }
+        }
+    };
+}
+message!(DetectionFrame, "detections", robot);
+message!(EmbeddingMsg, "embedding", robot);
+message!(VoteMsg, "vote", robot);
+message!(DecisionMsg, "decision", robot);
+message!(TruthMsg, "truth");
+
+/// Why bytes were refused. Every variant names what was wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    #[error("{kind}: {len} bytes exceeds the limit of {MAX_MESSAGE_BYTES}")]
+    TooLarge { kind: &'static str, len: usize },
+    #[error("{kind}: protocol version {got}, this build speaks {PROTOCOL_VERSION}")]
+    UnknownVersion { kind: &'static str, got: u16 },
+    #[error("{kind}: malformed: {reason}")]
+    Malformed { kind: &'static str, reason: String },
+    #[error("{kind}: {extra} trailing bytes after the message")]
+    TrailingBytes { kind: &'static str, extra: usize },
+    #[error("{kind}: {source}")]
+    Invalid { kind: &'static str, source: Invalid },
+    #[error("{kind}: published on robot {key:?}'s key but claims to be from {payload:?}")]
+    RobotMismatch { kind: &'static str, key: RobotId, payload: RobotId },
+}
+
+impl DecodeError {
+    /// A short label for metrics (`bad_messages_total{reason=...}`).
+    pub fn reason(&self) -> &'static str {
+        match self {
+            DecodeError::TooLarge { .. } => "too_large",
+            DecodeError::UnknownVersion { .. } => "version",
+            DecodeError::Malformed { .. } => "malformed",
+            DecodeError::TrailingBytes { .. } => "trailing",
+            DecodeError::Invalid { .. } => "invalid",
+            DecodeError::RobotMismatch { .. } => "robot_mismatch",
+        }
+    }
+}
+
+/// Encodes a message with the protocol version in front.
+pub fn encode<M: Message>(msg: &M) -> Vec<u8> {
+    // Encoding into a Vec only fails if a serde impl reports an error, which derived
+    // impls of these plain structs never do; the limit is not applied on encode.
+    bincode::serde::encode_to_vec((PROTOCOL_VERSION, msg), CONFIG).expect("spwi messages always encode")
+}
+
+/// Decodes and validates a message.
+pub fn decode<M: Message>(bytes: &[u8]) -> Result<M, DecodeError> {
+    let kind = M::KIND;
+    if bytes.len() > MAX_MESSAGE_BYTES {
+        return Err(DecodeError::TooLarge { kind, len: bytes.len() });
+    }
+    let malformed = |e: bincode::error::DecodeError| DecodeError::Malformed { kind, reason: e.to_string() };
+    let (version, n): (u16, usize) = bincode::serde::decode_from_slice(bytes, CONFIG).map_err(malformed)?;
+    if version != PROTOCOL_VERSION {
+        return Err(DecodeError::UnknownVersion { kind, got: version });
+    }
+    let (msg, m): (M, usize) = bincode::serde::decode_from_slice(&bytes[n..], CONFIG).map_err(malformed)?;
+    if n + m != bytes.len() {
+        return Err(DecodeError::TrailingBytes { kind, extra: bytes.len() - n - m });
+    }
+    msg.validate().map_err(|source| DecodeError::Invalid { kind, source })?;
+    Ok(msg)
+}
+
+/// Decodes a message received on robot `key_robot`'s key, refusing one whose payload
+/// names another robot (a spoofed or misrouted message).
+pub fn decode_from<M: Message>(bytes: &[u8], key_robot: &RobotId) -> Result<M, DecodeError> {
+    let msg: M = decode(bytes)?;
+    match msg.robot() {
+        Some(r) if r != key_robot => {
+            Err(DecodeError::RobotMismatch { kind: M::KIND, key: key_robot.clone(), payload: r.clone() })
+        }
+        _ => Ok(msg),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn vote() -> VoteMsg {
+        VoteMsg {
+            robot: RobotId::new("r1").unwrap(),
+            instance: 7,
+            tick: 42,
+            steps: vec![StepVote { class: 2, confidence: 0.75 }; 21],
+            visibility: 5,
+        }
+    }
+
+    #[test]
+    fn round_trip() {
+        let v = vote();
+        assert_eq!(decode::<VoteMsg>(&encode(&v)).unwrap(), v);
+    }
+
+    #[test]
+    fn refuses_trailing_bytes() {
+        let mut b = encode(&vote());
+        b.push(0);
+        assert!(matches!(decode::<VoteMsg>(&b), Err(DecodeError::TrailingBytes { extra: 1, .. })));
+    }
+
+    #[test]
+    fn refuses_truncation_at_every_length() {
+        let b = encode(&vote());
+        for n in 0..b.len() {
+            assert!(decode::<VoteMsg>(&b[..n]).is_err(), "accepted {n} of {} bytes", b.len());
+        }
+    }
+
+    #[test]
+    fn refuses_other_versions() {
+        let b = bincode::serde::encode_to_vec((PROTOCOL_VERSION + 1, vote()), CONFIG).unwrap();
+        assert!(matches!(decode::<VoteMsg>(&b), Err(DecodeError::UnknownVersion { got: 2, .. })));
+    }
+
+    #[test]
+    fn refuses_nan_and_bad_class() {
+        let mut v = vote();
+        v.steps[3].confidence = f32::NAN;
+        assert!(matches!(decode::<VoteMsg>(&encode(&v)), Err(DecodeError::Invalid { .. })));
+        let mut v = vote();
+        v.steps[0].class = 4;
+        let e = decode::<VoteMsg>(&encode(&v)).unwrap_err().to_string();
+        assert!(e.contains("steps.class"), "{e}");
+    }
+
+    #[test]
+    fn refuses_oversized_and_hostile_lengths() {
+        assert!(matches!(decode::<VoteMsg>(&vec![0u8; MAX_MESSAGE_BYTES + 1]), Err(DecodeError::TooLarge { .. })));
+        // version 1, robot id with a length prefix of u64::MAX: must fail, not allocate.
+        let mut b = bincode::serde::encode_to_vec(PROTOCOL_VERSION, CONFIG).unwrap();
+        b.extend([0xfd, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff]);
+        assert!(matches!(decode::<VoteMsg>(&b), Err(DecodeError::Malformed { .. })));
+    }
+
+    #[test]
+    fn refuses_invalid_robot_id_in_payload() {
+        let b = bincode::serde::encode_to_vec((PROTOCOL_VERSION, "a/b", 1u64), CONFIG).unwrap();
+        assert!(decode::<VoteMsg>(&b).is_err());
+    }
+
+    #[test]
+    fn refuses_spoofed_robot() {
+        let b = encode(&vote());
+        let other = RobotId::new("r2").unwrap();
+        assert!(matches!(decode_from::<VoteMsg>(&b, &other), Err(DecodeError::RobotMismatch { .. })));
+        assert!(decode_from::<VoteMsg>(&b, &RobotId::new("r1").unwrap()).is_ok());
+    }
+}

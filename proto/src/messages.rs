@@ -1,0 +1,348 @@
+//! The payloads. Plain serde structs; [`crate::codec`] encodes them and calls
+//! [`Validate::validate`] on everything it decodes, so a value of these types that came
+//! from the network has the dimensions documented here and only finite floats.
+
+use crate::id::RobotId;
+use serde::{Deserialize, Serialize};
+
+/// Length of an appearance feature (the paper's ResNet50 output) and of the global
+/// scene feature.
+pub const FEATURE_DIM: usize = 512;
+/// 17 COCO keypoints, (x, y) each, in image pixels.
+pub const KEYPOINT_VALUES: usize = 34;
+/// Length of the GCN's human-node embedding that robots share.
+pub const EMBEDDING_DIM: usize = 128;
+/// Stations: 0 storage, 1 workstation, 2 assembly, 3 manufacturing.
+pub const NUM_CLASSES: usize = 4;
+/// Most object detections one frame may carry.
+pub const MAX_OBJECTS: usize = 64;
+/// Most steps (t plus forecast) one vote or decision may carry.
+pub const MAX_STEPS: usize = 128;
+/// Most members one decision may list.
+pub const MAX_MEMBERS: usize = 1024;
+
+/// Station names by class id.
+pub const STATION_NAMES: [&str; NUM_CLASSES] = ["storage", "workstation", "assembly", "manufacturing"];
+
+/// Why a value failed validation: the field and what is wrong with it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("field `{field}`: {problem}")]
+pub struct Invalid {
+    pub field: &'static str,
+    pub problem: String,
+}
+
+fn invalid(field: &'static str, problem: impl Into<String>) -> Invalid {
+    Invalid { field, problem: problem.into() }
+}
+
+/// Checked on every decoded message.
+pub trait Validate {
+    fn validate(&self) -> Result<(), Invalid>;
+}
+
+fn finite(field: &'static str, xs: &[f32]) -> Result<(), Invalid> {
+    match xs.iter().position(|x| !x.is_finite()) {
+        Some(i) => Err(invalid(field, format!("value {i} is {} (must be finite)", xs[i]))),
+        None => Ok(()),
+    }
+}
+
+fn dim(field: &'static str, xs: &[f32], want: usize) -> Result<(), Invalid> {
+    if xs.len() != want {
+        return Err(invalid(field, format!("has {} values, expected {want}", xs.len())));
+    }
+    finite(field, xs)
+}
+
+fn class(field: &'static str, c: u8) -> Result<(), Invalid> {
+    if (c as usize) < NUM_CLASSES {
+        Ok(())
+    } else {
+        Err(invalid(field, format!("class {c} out of range 0..{NUM_CLASSES}")))
+    }
+}
+
+/// An axis-aligned box in image pixels: top-left corner, width, height.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BBox {
+    pub x: f32,
+    pub y: f32,
+    pub w: f32,
+    pub h: f32,
+}
+
+impl BBox {
+    pub fn center(&self) -> (f32, f32) {
+        (self.x + self.w / 2.0, self.y + self.h / 2.0)
+    }
+    fn validate(&self, field: &'static str) -> Result<(), Invalid> {
+        finite(field, &[self.x, self.y, self.w, self.h])?;
+        if self.w < 0.0 || self.h < 0.0 {
+            return Err(invalid(field, "negative width or height"));
+        }
+        Ok(())
+    }
+}
+
+/// What kind of object a detection is (paper Table I), plus anything else a detector
+/// may report. The station an object marks is [`ObjectClass::station`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum ObjectClass {
+    Crate,
+    Box,
+    Pallet,
+    Desk,
+    Chair,
+    StorageDrawer,
+    Computer,
+    Workbench,
+    CncMachine,
+    Table,
+    /// Not a station object (clutter, a robot, a false positive of unknown kind).
+    Other,
+}
+
+impl ObjectClass {
+    pub const ALL: [ObjectClass; 11] = [
+        ObjectClass::Crate,
+        ObjectClass::Box,
+        ObjectClass::Pallet,
+        ObjectClass::Desk,
+        ObjectClass::Chair,
+        ObjectClass::StorageDrawer,
+        ObjectClass::Computer,
+        ObjectClass::Workbench,
+        ObjectClass::CncMachine,
+        ObjectClass::Table,
+        ObjectClass::Other,
+    ];
+
+    /// The station class this object marks, if any. Chairs appear at both the
+    /// workstation and the assembly station; this returns the workstation.
+    pub fn station(self) -> Option<u8> {
+        use ObjectClass::*;
+        match self {
+            Crate | Box | Pallet => Some(0),
+            Desk | Chair | StorageDrawer | Computer => Some(1),
+            Workbench => Some(2),
+            CncMachine | Table => Some(3),
+            Other => None,
+        }
+    }
+}
+
+/// The worker as one robot's detector sees it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HumanDetection {
+    pub bbox: BBox,
+    /// 17 COCO keypoints as x0, y0, x1, y1, … in image pixels ([`KEYPOINT_VALUES`]).
+    pub keypoints: Vec<f32>,
+    /// Appearance feature ([`FEATURE_DIM`]).
+    pub feature: Vec<f32>,
+}
+
+/// One detected object.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ObjectDetection {
+    pub class: ObjectClass,
+    pub bbox: BBox,
+    /// Detector score in [0, 1].
+    pub score: f32,
+    /// Appearance feature ([`FEATURE_DIM`]).
+    pub feature: Vec<f32>,
+}
+
+/// One camera frame's worth of detections of one robot, for one tick.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DetectionFrame {
+    pub robot: RobotId,
+    pub tick: u64,
+    /// Image size in pixels (width, height): bbox distances are normalised by its diagonal.
+    pub image_size: [f32; 2],
+    pub human: Option<HumanDetection>,
+    pub objects: Vec<ObjectDetection>,
+    /// Global appearance of the whole view ([`FEATURE_DIM`]).
+    pub scene_feature: Vec<f32>,
+}
+
+impl DetectionFrame {
+    /// Visibility count N_detected: the worker (if seen) plus every object detected.
+    pub fn visibility(&self) -> u32 {
+        self.objects.len() as u32 + u32::from(self.human.is_some())
+    }
+}
+
+impl Validate for DetectionFrame {
+    fn validate(&self) -> Result<(), Invalid> {
+        finite("image_size", &self.image_size)?;
+        if self.image_size.iter().any(|&s| s < 1.0) {
+            return Err(invalid("image_size", "width and height must be at least 1 pixel"));
+        }
+        dim("scene_feature", &self.scene_feature, FEATURE_DIM)?;
+        if let Some(h) = &self.human {
+            h.bbox.validate("human.bbox")?;
+            dim("human.keypoints", &h.keypoints, KEYPOINT_VALUES)?;
+            dim("human.feature", &h.feature, FEATURE_DIM)?;
+        }
+        if self.objects.len() > MAX_OBJECTS {
+            return Err(invalid("objects", format!("{} objects, at most {MAX_OBJECTS}", self.objects.len())));
+        }
+        for o in &self.objects {
+            o.bbox.validate("objects.bbox")?;
+            dim("objects.feature", &o.feature, FEATURE_DIM)?;
+            if !(0.0..=1.0).contains(&o.score) {
+                return Err(invalid("objects.score", format!("{} not in [0, 1]", o.score)));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A robot's GCN output for one tick, shared so peers can run the collective GRU.
+/// `embedding` is `None` when the robot does not see the worker this tick: it will not
+/// vote for this tick, and peers need not wait for it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EmbeddingMsg {
+    pub robot: RobotId,
+    /// Random per process start: two daemons that share a robot id differ here.
+    pub instance: u64,
+    pub tick: u64,
+    pub embedding: Option<Vec<f32>>,
+    pub visibility: u32,
+}
+
+impl Validate for EmbeddingMsg {
+    fn validate(&self) -> Result<(), Invalid> {
+        match &self.embedding {
+            Some(e) => dim("embedding", e, EMBEDDING_DIM),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The predicted class and its calibrated confidence for one step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StepVote {
+    pub class: u8,
+    pub confidence: f32,
+}
+
+/// A robot's vote for one tick: `steps[0]` is the prediction for t, `steps[h]` for t+h.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VoteMsg {
+    pub robot: RobotId,
+    pub instance: u64,
+    pub tick: u64,
+    pub steps: Vec<StepVote>,
+    pub visibility: u32,
+}
+
+impl Validate for VoteMsg {
+    fn validate(&self) -> Result<(), Invalid> {
+        if self.steps.is_empty() || self.steps.len() > MAX_STEPS {
+            return Err(invalid("steps", format!("{} steps, expected 1..={MAX_STEPS}", self.steps.len())));
+        }
+        for s in &self.steps {
+            class("steps.class", s.class)?;
+            if !(s.confidence.is_finite() && (0.0..=1.0).contains(&s.confidence)) {
+                return Err(invalid("steps.confidence", format!("{} not in [0, 1]", s.confidence)));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How a decision came about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum DecidedBy {
+    /// Every live member had voted (or said it does not see the worker).
+    AllVoted,
+    /// The tick's deadline passed first.
+    Deadline,
+}
+
+/// The team's decision for one step: the winning class and its weighted score.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TeamStep {
+    pub class: u8,
+    pub score: f32,
+}
+
+/// A robot's view of the team decision for one tick. `steps` is empty when no member
+/// saw the worker; otherwise `steps[0]` is for t and `steps[h]` for t+h.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DecisionMsg {
+    pub robot: RobotId,
+    pub instance: u64,
+    pub tick: u64,
+    pub steps: Vec<TeamStep>,
+    /// The members whose votes were counted, sorted.
+    pub voters: Vec<RobotId>,
+    /// How many members were live when deciding.
+    pub live_members: u32,
+    pub decided_by: DecidedBy,
+}
+
+impl Validate for DecisionMsg {
+    fn validate(&self) -> Result<(), Invalid> {
+        if self.steps.len() > MAX_STEPS {
+            return Err(invalid("steps", format!("{} steps, at most {MAX_STEPS}", self.steps.len())));
+        }
+        for s in &self.steps {
+            class("steps.class", s.class)?;
+            finite("steps.score", &[s.score])?;
+        }
+        if self.voters.len() > MAX_MEMBERS {
+            return Err(invalid("voters", format!("{} voters, at most {MAX_MEMBERS}", self.voters.len())));
+        }
+        Ok(())
+    }
+}
+
+/// What the worker is doing, as the simulated world knows it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum WorkerPhase {
+    /// Walking to a goal.
+    Moving,
+    /// Walking, but the goal changed within the last seconds.
+    Transition,
+    /// Working at a station.
+    Stationary,
+}
+
+/// A robot's pose on the floor (metres, radians), for views and scoring.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RobotPose {
+    pub robot: RobotId,
+    pub position: [f32; 2],
+    pub heading: f32,
+}
+
+/// Ground truth for one tick (simulation only; agents never read it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthMsg {
+    pub tick: u64,
+    /// The station the worker is heading to or working at.
+    pub intent: u8,
+    pub phase: WorkerPhase,
+    pub worker_position: [f32; 2],
+    pub worker_heading: f32,
+    pub robots: Vec<RobotPose>,
+}
+
+impl Validate for TruthMsg {
+    fn validate(&self) -> Result<(), Invalid> {
+        class("intent", self.intent)?;
+        finite("worker_position", &self.worker_position)?;
+        finite("worker_heading", &[self.worker_heading])?;
+        if self.robots.len() > MAX_MEMBERS {
+            return Err(invalid("robots", format!("{} robots, at most {MAX_MEMBERS}", self.robots.len())));
+        }
+        for r in &self.robots {
+            finite("robots.position", &r.position)?;
+            finite("robots.heading", &[r.heading])?;
+        }
+        Ok(())
+    }
+}

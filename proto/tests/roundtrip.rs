@@ -1,0 +1,96 @@
+//! Property tests of the codec: every valid message survives a round trip unchanged,
+//! and no byte string makes `decode` panic.
+
+use proptest::prelude::*;
+use spwi_proto::*;
+
+fn robot() -> impl Strategy<Value = RobotId> {
+    "[A-Za-z0-9_-]{1,64}".prop_map(|s| RobotId::new(s).unwrap())
+}
+
+fn finite() -> impl Strategy<Value = f32> {
+    -1.0e6f32..1.0e6
+}
+
+fn bbox() -> impl Strategy<Value = BBox> {
+    (finite(), finite(), 0.0f32..2000.0, 0.0f32..2000.0).prop_map(|(x, y, w, h)| BBox { x, y, w, h })
+}
+
+fn frame() -> impl Strategy<Value = DetectionFrame> {
+    let human =
+        (bbox(), prop::collection::vec(finite(), KEYPOINT_VALUES), prop::collection::vec(finite(), FEATURE_DIM))
+            .prop_map(|(bbox, keypoints, feature)| HumanDetection { bbox, keypoints, feature });
+    let object = (
+        prop::sample::select(ObjectClass::ALL.to_vec()),
+        bbox(),
+        0.0f32..=1.0,
+        prop::collection::vec(finite(), FEATURE_DIM),
+    )
+        .prop_map(|(class, bbox, score, feature)| ObjectDetection { class, bbox, score, feature });
+    (
+        robot(),
+        any::<u64>(),
+        (1.0f32..4000.0, 1.0f32..4000.0),
+        prop::option::of(human),
+        prop::collection::vec(object, 0..6),
+        prop::collection::vec(finite(), FEATURE_DIM),
+    )
+        .prop_map(|(robot, tick, (w, h), human, objects, scene_feature)| DetectionFrame {
+            robot,
+            tick,
+            image_size: [w, h],
+            human,
+            objects,
+            scene_feature,
+        })
+}
+
+fn steps() -> impl Strategy<Value = Vec<StepVote>> {
+    prop::collection::vec((0u8..4, 0.0f32..=1.0).prop_map(|(class, confidence)| StepVote { class, confidence }), 1..40)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn frames_round_trip(f in frame()) {
+        prop_assert_eq!(decode::<DetectionFrame>(&encode(&f)).unwrap(), f);
+    }
+
+    #[test]
+    fn embeddings_round_trip(robot in robot(), instance in any::<u64>(), tick in any::<u64>(),
+                             e in prop::option::of(prop::collection::vec(finite(), EMBEDDING_DIM)), visibility in any::<u32>()) {
+        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility };
+        prop_assert_eq!(decode::<EmbeddingMsg>(&encode(&m)).unwrap(), m);
+    }
+
+    #[test]
+    fn votes_round_trip(robot in robot(), instance in any::<u64>(), tick in any::<u64>(), steps in steps(), visibility in any::<u32>()) {
+        let m = VoteMsg { robot: robot.clone(), instance, tick, steps, visibility };
+        prop_assert_eq!(decode_from::<VoteMsg>(&encode(&m), &robot).unwrap(), m);
+    }
+
+    #[test]
+    fn decisions_round_trip(robot in robot(), tick in any::<u64>(), voters in prop::collection::vec(robot(), 0..10),
+                            steps in prop::collection::vec((0u8..4, finite()).prop_map(|(class, score)| TeamStep { class, score }), 0..30)) {
+        let m = DecisionMsg { robot, instance: 1, tick, steps, voters, live_members: 3, decided_by: DecidedBy::Deadline };
+        prop_assert_eq!(decode::<DecisionMsg>(&encode(&m)).unwrap(), m);
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..2048)) {
+        let _ = decode::<DetectionFrame>(&bytes);
+        let _ = decode::<EmbeddingMsg>(&bytes);
+        let _ = decode::<VoteMsg>(&bytes);
+        let _ = decode::<DecisionMsg>(&bytes);
+        let _ = decode::<TruthMsg>(&bytes);
+    }
+
+    #[test]
+    fn flipped_bytes_never_panic(f in frame(), at in any::<prop::sample::Index>(), x in 1u8..=255) {
+        let mut b = encode(&f);
+        let i = at.index(b.len());
+        b[i] ^= x;
+        let _ = decode::<DetectionFrame>(&b);
+    }
+}
