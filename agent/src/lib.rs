@@ -1,1 +1,36 @@
+//! spwi-agent: the daemon each robot runs to predict, with its peers, where a human
+//! worker is heading (paper sections II and III-E; `shared/DESIGN.md`).
+//!
+//! ```text
+//!  detections ─► graph.rs ─► model/ (GCN) ─► embedding ──publish──► peers
+//!   (Zenoh)      star graph     │
+//!                               ▼
+//!        own ‖ mean(peer embeddings) ‖ keypoints ─► temporal.rs (window of W ticks)
+//!                               ▼
+//!                       model/ (ego or collective GRU) ─► vote.rs ──publish──► peers
+//!                               ▼
+//!            consensus.rs over the votes of the live members ─► decision ──publish
+//! ```
+//!
+//! Modules:
+//! - [`engine`]: one robot's tick state machine, pure (inputs and `now` in, messages out);
+//! - [`graph`], [`temporal`], [`vote`], [`consensus`]: the pure pipeline stages;
+//! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
+//! - [`daemon`]: Zenoh wiring, membership (liveliness), the event loop;
+//! - [`config`], [`zenoh_config`], [`cli`]: settings and the command line;
+//! - [`http`], [`status`], [`metrics`]: `/healthz`, `/status`, `/metrics`.
 
+pub mod cli;
+pub mod config;
+pub mod consensus;
+pub mod daemon;
+pub mod engine;
+pub mod graph;
+pub mod http;
+pub mod manifest;
+pub mod metrics;
+pub mod model;
+pub mod status;
+pub mod temporal;
+pub mod vote;
+pub mod zenoh_config;

@@ -1,0 +1,133 @@
+//! The `spwi-agent` command line: parse, start tracing, load config and models, run
+//! the daemon until Ctrl-C / SIGTERM. The first signal leaves the fleet gracefully
+//! (token undeclared, session closed); a second exits at once.
+
+use crate::config::{AgentConfig, LogFormat};
+use crate::daemon::{self, Options};
+use anyhow::{Context, Result};
+use clap::Parser;
+use spwi_proto::{FleetId, RobotId};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use tokio::sync::watch;
+
+/// One robot's spwi daemon: shares what it sees and agrees with its peers on where
+/// the worker is going.
+#[derive(Debug, Parser)]
+#[command(name = "spwi-agent", version)]
+pub struct Args {
+    /// This robot's id ([A-Za-z0-9_-]{1,64}); unique within the fleet.
+    #[arg(long, env = "SPWI_ROBOT_ID")]
+    pub robot_id: RobotId,
+    /// The fleet (team) to join.
+    #[arg(long, env = "SPWI_FLEET", default_value = "default")]
+    pub fleet: FleetId,
+    /// Agent settings (TOML); defaults apply to anything not set.
+    #[arg(long, env = "SPWI_CONFIG")]
+    pub config: Option<PathBuf>,
+    /// Zenoh's own config file (json5), as zenohd takes it.
+    #[arg(long, env = "ZENOH_CONFIG")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Zenoh setting override KEY:VALUE (VALUE in json5), repeatable,
+    /// e.g. --cfg 'connect/endpoints:["tcp/10.0.0.2:7447"]'.
+    #[arg(long = "cfg", value_name = "KEY:VALUE")]
+    pub cfg: Vec<String>,
+    /// Serve /healthz, /status and /metrics on this address (overrides http.listen).
+    #[arg(long)]
+    pub http: Option<std::net::SocketAddr>,
+    /// Model set folder (overrides models.dir).
+    #[arg(long)]
+    pub models: Option<PathBuf>,
+}
+
+/// Sets up `tracing`: `RUST_LOG` wins; otherwise info for spwi and only warnings and
+/// errors from Zenoh, whose routine churn messages look alarming.
+pub fn init_tracing(format: LogFormat) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn,zenoh_transport=error"));
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    let _ = match format {
+        LogFormat::Human => builder.try_init(),
+        LogFormat::Json => builder.json().try_init(),
+    };
+}
+
+/// Resolves Ctrl-C / SIGTERM into the shutdown signal; a second one exits at once.
+pub fn spawn_signal_handler(tx: watch::Sender<bool>) {
+    tokio::spawn(async move {
+        let mut signals = 0;
+        loop {
+            wait_for_signal().await;
+            signals += 1;
+            if signals == 1 {
+                tracing::info!("shutting down (signal again to exit at once)");
+                let _ = tx.send(true);
+            } else {
+                std::process::exit(130);
+            }
+        }
+    });
+}
+
+async fn wait_for_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+async fn run(args: Args) -> Result<()> {
+    let mut config = AgentConfig::load(args.config.as_deref())?;
+    if let Some(h) = args.http {
+        config.http.listen = Some(h);
+    }
+    if let Some(m) = args.models {
+        config.models.dir = m;
+    }
+    init_tracing(config.log.format);
+    config.validate()?;
+    let zenoh = crate::zenoh_config::build(args.zenoh_config.as_deref(), &args.cfg)?;
+    let models = tokio::task::spawn_blocking({
+        let config = config.clone();
+        move || daemon::load_models(&config)
+    })
+    .await
+    .context("model loading panicked")??;
+    let (tx, rx) = watch::channel(false);
+    spawn_signal_handler(tx);
+    daemon::run(Options { robot: args.robot_id, fleet: args.fleet, config, zenoh }, models, rx, None).await
+}
+
+/// `main` of `spwi-agent`.
+pub fn main() -> ExitCode {
+    let args = Args::parse();
+    let rt = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("spwi-agent: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match rt.block_on(run(args)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("spwi-agent: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,260 @@
+//! The agent's configuration: a TOML file with defaults for everything, then
+//! environment overrides (`SPWI_*`), then [`AgentConfig::validate`], which names the
+//! field and the allowed range of anything out of bounds. Zenoh's own settings are not
+//! here: they stay Zenoh's (see [`crate::zenoh_config`]).
+
+use crate::model::Backend;
+use crate::temporal::TemporalModel;
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AgentConfig {
+    pub tick: TickConfig,
+    pub models: ModelsConfig,
+    pub http: HttpConfig,
+    pub log: LogConfig,
+}
+
+/// When a robot stops waiting for its peers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TickConfig {
+    /// Which GRU the robot runs.
+    pub temporal: TemporalModel,
+    /// Wait at most this long for peers' embeddings before running the GRU (ms).
+    pub embedding_wait_ms: u64,
+    /// Decide with the votes at hand this long after a tick starts (ms).
+    pub decision_deadline_ms: u64,
+    /// Weight of visibility in the vote; default: the model manifest's.
+    pub alpha: Option<f32>,
+    /// Weight of confidence in the vote; default: the model manifest's.
+    pub beta: Option<f32>,
+    /// Most ticks in flight at once.
+    pub max_open_ticks: usize,
+    /// Capacity of the event queue between Zenoh and the tick loop.
+    pub event_queue: usize,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModelsConfig {
+    /// Folder of the model set (holding `manifest.json`).
+    pub dir: PathBuf,
+    pub backend: Backend,
+    /// `libonnxruntime.so` for the ort backend; default: `ORT_DYLIB_PATH`.
+    pub ort_library: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HttpConfig {
+    /// Address for `/healthz`, `/status` and `/metrics`; none to serve nothing.
+    pub listen: Option<SocketAddr>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LogFormat {
+    #[default]
+    Human,
+    Json,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LogConfig {
+    pub format: LogFormat,
+}
+
+impl Default for TickConfig {
+    fn default() -> Self {
+        TickConfig {
+            temporal: TemporalModel::Collective,
+            embedding_wait_ms: 30,
+            decision_deadline_ms: 60,
+            alpha: None,
+            beta: None,
+            max_open_ticks: 64,
+            event_queue: 1024,
+        }
+    }
+}
+
+impl Default for ModelsConfig {
+    fn default() -> Self {
+        ModelsConfig { dir: PathBuf::from("models/fixture"), backend: Backend::Tract, ort_library: None }
+    }
+}
+
+impl Default for HttpConfig {
+    fn default() -> Self {
+        HttpConfig { listen: None }
+    }
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        LogConfig { format: LogFormat::Human }
+    }
+}
+
+impl Default for AgentConfig {
+    fn default() -> Self {
+        AgentConfig {
+            tick: TickConfig::default(),
+            models: ModelsConfig::default(),
+            http: HttpConfig::default(),
+            log: LogConfig::default(),
+        }
+    }
+}
+
+/// The environment variables that override the file, and the field each sets.
+pub const ENV_OVERRIDES: [(&str, &str); 7] = [
+    ("SPWI_MODELS_DIR", "models.dir"),
+    ("SPWI_BACKEND", "models.backend"),
+    ("SPWI_ORT_LIBRARY", "models.ort_library"),
+    ("SPWI_HTTP", "http.listen"),
+    ("SPWI_TEMPORAL", "tick.temporal"),
+    ("SPWI_DECISION_DEADLINE_MS", "tick.decision_deadline_ms"),
+    ("SPWI_LOG_FORMAT", "log.format"),
+];
+
+impl AgentConfig {
+    /// Defaults, overlaid by `file` if given, then by the environment.
+    pub fn load(file: Option<&Path>) -> Result<AgentConfig> {
+        let mut cfg = match file {
+            Some(p) => {
+                let text = std::fs::read_to_string(p).with_context(|| format!("cannot read config {}", p.display()))?;
+                toml::from_str(&text).with_context(|| format!("config {} is not valid", p.display()))?
+            }
+            None => AgentConfig::default(),
+        };
+        cfg.apply_env(|k| std::env::var(k).ok())?;
+        Ok(cfg)
+    }
+
+    /// Applies `SPWI_*` overrides read through `get`.
+    pub fn apply_env(&mut self, get: impl Fn(&str) -> Option<String>) -> Result<()> {
+        fn parse<T: std::str::FromStr>(var: &str, v: &str) -> Result<T>
+        where
+            T::Err: std::fmt::Display,
+        {
+            v.parse().map_err(|e| anyhow::anyhow!("environment variable {var}={v:?}: {e}"))
+        }
+        fn enum_value<T: serde::de::DeserializeOwned>(var: &str, v: &str) -> Result<T> {
+            serde_json::from_value(serde_json::Value::String(v.to_owned()))
+                .map_err(|e| anyhow::anyhow!("environment variable {var}={v:?}: {e}"))
+        }
+        for (var, _) in ENV_OVERRIDES {
+            let Some(v) = get(var) else { continue };
+            match var {
+                "SPWI_MODELS_DIR" => self.models.dir = PathBuf::from(v),
+                "SPWI_BACKEND" => self.models.backend = parse(var, &v)?,
+                "SPWI_ORT_LIBRARY" => self.models.ort_library = Some(PathBuf::from(v)),
+                "SPWI_HTTP" => self.http.listen = if v.is_empty() { None } else { Some(parse(var, &v)?) },
+                "SPWI_TEMPORAL" => self.tick.temporal = enum_value(var, &v)?,
+                "SPWI_DECISION_DEADLINE_MS" => self.tick.decision_deadline_ms = parse(var, &v)?,
+                "SPWI_LOG_FORMAT" => self.log.format = enum_value(var, &v)?,
+                _ => unreachable!("every override is handled"),
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses values out of range, naming the field and the range.
+    pub fn validate(&self) -> Result<()> {
+        let t = &self.tick;
+        if !(1..=1000).contains(&t.decision_deadline_ms) {
+            bail!("tick.decision_deadline_ms = {}: must be within 1..=1000 (a tick is 100 ms)", t.decision_deadline_ms);
+        }
+        if !(1..=t.decision_deadline_ms).contains(&t.embedding_wait_ms) {
+            bail!(
+                "tick.embedding_wait_ms = {}: must be within 1..={} (tick.decision_deadline_ms)",
+                t.embedding_wait_ms,
+                t.decision_deadline_ms
+            );
+        }
+        for (name, v) in [("tick.alpha", t.alpha), ("tick.beta", t.beta)] {
+            if let Some(v) = v {
+                if !(v.is_finite() && (0.0..=1000.0).contains(&v)) {
+                    bail!("{name} = {v}: must be a finite number within 0..=1000");
+                }
+            }
+        }
+        if t.alpha == Some(0.0) && t.beta == Some(0.0) {
+            bail!("tick.alpha and tick.beta are both 0: at least one must weigh the votes");
+        }
+        if !(1..=10_000).contains(&t.max_open_ticks) {
+            bail!("tick.max_open_ticks = {}: must be within 1..=10000", t.max_open_ticks);
+        }
+        if !(16..=1_000_000).contains(&t.event_queue) {
+            bail!("tick.event_queue = {}: must be within 16..=1000000", t.event_queue);
+        }
+        Ok(())
+    }
+
+    pub fn embedding_wait(&self) -> Duration {
+        Duration::from_millis(self.tick.embedding_wait_ms)
+    }
+
+    pub fn decision_deadline(&self) -> Duration {
+        Duration::from_millis(self.tick.decision_deadline_ms)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_a_file_overrides_them() {
+        AgentConfig::default().validate().unwrap();
+        let cfg: AgentConfig = toml::from_str("[tick]\ntemporal = \"ego\"\ndecision_deadline_ms = 80\n").unwrap();
+        assert_eq!(cfg.tick.temporal, TemporalModel::Ego);
+        assert_eq!(cfg.tick.decision_deadline_ms, 80);
+        assert_eq!(cfg.tick.embedding_wait_ms, 30);
+    }
+
+    #[test]
+    fn unknown_fields_are_refused() {
+        let e = toml::from_str::<AgentConfig>("[tick]\ndeadline = 5\n").unwrap_err().to_string();
+        assert!(e.contains("deadline"), "{e}");
+    }
+
+    #[test]
+    fn validate_names_the_field_and_the_range() {
+        let mut c = AgentConfig::default();
+        c.tick.decision_deadline_ms = 0;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("tick.decision_deadline_ms") && e.contains("1..=1000"), "{e}");
+        let mut c = AgentConfig::default();
+        c.tick.embedding_wait_ms = 100;
+        assert!(c.validate().unwrap_err().to_string().contains("tick.embedding_wait_ms"));
+        let mut c = AgentConfig::default();
+        c.tick.alpha = Some(f32::NAN);
+        assert!(c.validate().unwrap_err().to_string().contains("tick.alpha"));
+    }
+
+    #[test]
+    fn environment_overrides_and_bad_values_name_the_variable() {
+        let mut c = AgentConfig::default();
+        let env = |k: &str| match k {
+            "SPWI_BACKEND" => Some("ort".to_owned()),
+            "SPWI_TEMPORAL" => Some("ego".to_owned()),
+            "SPWI_HTTP" => Some("127.0.0.1:9000".to_owned()),
+            _ => None,
+        };
+        c.apply_env(env).unwrap();
+        assert_eq!(c.models.backend, Backend::Ort);
+        assert_eq!(c.tick.temporal, TemporalModel::Ego);
+        assert_eq!(c.http.listen, Some("127.0.0.1:9000".parse().unwrap()));
+        let e = c.apply_env(|k| (k == "SPWI_DECISION_DEADLINE_MS").then(|| "soon".to_owned())).unwrap_err();
+        assert!(e.to_string().contains("SPWI_DECISION_DEADLINE_MS"), "{e}");
+    }
+}

@@ -1,0 +1,181 @@
+//! ONNX models: loaded, checked and optimised once per process, shared read-only
+//! ([`ModelSet`] behind an `Arc`), and run through a per-robot [`Inference`] that
+//! owns the mutable run state. Two runtimes sit behind one small trait:
+//!
+//! - `tract` (pure Rust, always built, the default);
+//! - `ort`: ONNX Runtime, loaded at run time from the `onnxruntime` wheel's shared
+//!   library (cargo feature `ort`), so nothing is downloaded at build time.
+
+mod tract;
+#[cfg(feature = "ort")]
+mod ort;
+
+use crate::graph::StarGraph;
+use crate::manifest::{Manifest, ModelSpec};
+use crate::temporal::TemporalModel;
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use spwi_proto::{EMBEDDING_DIM, NUM_CLASSES};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Which ONNX runtime runs the models.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Backend {
+    #[default]
+    Tract,
+    Ort,
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "tract" => Ok(Backend::Tract),
+            "ort" => Ok(Backend::Ort),
+            _ => Err(format!("unknown backend {s:?}; use \"tract\" or \"ort\"")),
+        }
+    }
+}
+
+/// One input tensor: shape and row-major data.
+pub struct Input<'a> {
+    pub shape: &'a [usize],
+    pub data: &'a [f32],
+}
+
+/// A model loaded once and shared by every robot of the process.
+trait LoadedModel: Send + Sync {
+    /// A fresh run state for one robot.
+    fn runner(&self) -> Result<Box<dyn Runner>>;
+}
+
+/// Runs one model; holds whatever mutable state the runtime needs.
+pub trait Runner: Send {
+    /// Runs the model, returning each output flattened, in manifest order.
+    fn run(&mut self, inputs: &[Input<'_>]) -> Result<Vec<Vec<f32>>>;
+}
+
+/// The three models of a model set, checked against its manifest.
+pub struct ModelSet {
+    pub manifest: Manifest,
+    pub dir: PathBuf,
+    pub backend: Backend,
+    gcn: Box<dyn LoadedModel>,
+    ego_gru: Box<dyn LoadedModel>,
+    collective_gru: Box<dyn LoadedModel>,
+}
+
+impl std::fmt::Debug for ModelSet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ModelSet").field("dir", &self.dir).field("backend", &self.backend).finish_non_exhaustive()
+    }
+}
+
+impl ModelSet {
+    /// Loads and checks the model set in `dir` with `backend`. `ort_library` is the
+    /// path of `libonnxruntime.so` (ort backend only).
+    pub fn load(dir: &Path, backend: Backend, ort_library: Option<&Path>) -> Result<Arc<ModelSet>> {
+        let manifest = Manifest::load(dir)?;
+        let load = |spec: &ModelSpec| -> Result<Box<dyn LoadedModel>> {
+            let path = dir.join(&spec.file);
+            match backend {
+                Backend::Tract => Ok(Box::new(tract::TractModel::load(&path)?)),
+                #[cfg(feature = "ort")]
+                Backend::Ort => Ok(Box::new(ort::OrtModel::load(&path, ort_library)?)),
+                #[cfg(not(feature = "ort"))]
+                Backend::Ort => {
+                    let _ = ort_library;
+                    bail!("backend \"ort\" was asked for, but this build has no ONNX Runtime support (rebuild with `--features ort`)")
+                }
+            }
+        };
+        let set = ModelSet {
+            gcn: load(&manifest.models.gcn)?,
+            ego_gru: load(&manifest.models.ego_gru)?,
+            collective_gru: load(&manifest.models.collective_gru)?,
+            manifest,
+            dir: dir.to_owned(),
+            backend,
+        };
+        Ok(Arc::new(set))
+    }
+
+    /// Run state for one robot using `temporal` as its GRU.
+    pub fn inference(self: &Arc<Self>, temporal: TemporalModel) -> Result<Inference> {
+        let gru = match temporal {
+            TemporalModel::Ego => &self.ego_gru,
+            TemporalModel::Collective => &self.collective_gru,
+        };
+        Ok(Inference { set: Arc::clone(self), gcn: self.gcn.runner()?, gru: gru.runner()?, temporal })
+    }
+
+    /// The GRU's softmax temperature T for `temporal`.
+    pub fn temperature(&self, temporal: TemporalModel) -> f32 {
+        let spec = match temporal {
+            TemporalModel::Ego => &self.manifest.models.ego_gru,
+            TemporalModel::Collective => &self.manifest.models.collective_gru,
+        };
+        spec.temperature.unwrap_or(1.0) // validated present by Manifest::load
+    }
+
+    /// Raw access to one model by manifest name, for golden tests and benchmarks.
+    pub fn runner(&self, name: &str) -> Result<Box<dyn Runner>> {
+        match name {
+            "gcn" => self.gcn.runner(),
+            "ego_gru" => self.ego_gru.runner(),
+            "collective_gru" => self.collective_gru.runner(),
+            _ => bail!("no model named {name:?} (gcn, ego_gru, collective_gru)"),
+        }
+    }
+}
+
+/// The GCN's output for the worker node.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GcnOutput {
+    pub embedding: Vec<f32>,
+    pub logits: [f32; NUM_CLASSES],
+}
+
+/// One robot's model runners.
+pub struct Inference {
+    set: Arc<ModelSet>,
+    gcn: Box<dyn Runner>,
+    gru: Box<dyn Runner>,
+    pub temporal: TemporalModel,
+}
+
+impl Inference {
+    pub fn set(&self) -> &Arc<ModelSet> {
+        &self.set
+    }
+
+    pub fn gcn(&mut self, g: &StarGraph) -> Result<GcnOutput> {
+        let n = g.max_nodes;
+        let out = self.gcn.run(&[
+            Input { shape: &[1, n, crate::graph::NODE_FEATURE_DIM], data: &g.x },
+            Input { shape: &[1, n, n], data: &g.adj },
+        ])?;
+        let [embedding, logits] = <[Vec<f32>; 2]>::try_from(out).map_err(|o| anyhow::anyhow!("gcn gave {} outputs", o.len()))?;
+        if embedding.len() != EMBEDDING_DIM || logits.len() != NUM_CLASSES {
+            bail!("gcn gave an embedding of {} and {} logits", embedding.len(), logits.len());
+        }
+        if embedding.iter().chain(&logits).any(|v| !v.is_finite()) {
+            bail!("gcn produced a non-finite value");
+        }
+        Ok(GcnOutput { embedding, logits: logits.try_into().expect("length checked") })
+    }
+
+    /// Logits for t and each forecast step, from a `[W, row_dim]` window.
+    pub fn gru(&mut self, window: &[f32]) -> Result<Vec<[f32; NUM_CLASSES]>> {
+        let m = &self.set.manifest;
+        let dim = self.temporal.row_dim();
+        let out = self.gru.run(&[Input { shape: &[1, m.window, dim], data: window }])?;
+        let logits = out.into_iter().next().context("gru gave no output")?;
+        if logits.len() != (m.horizon + 1) * NUM_CLASSES || logits.iter().any(|v| !v.is_finite()) {
+            bail!("gru gave {} values (want {}) or a non-finite one", logits.len(), (m.horizon + 1) * NUM_CLASSES);
+        }
+        Ok(logits.chunks_exact(NUM_CLASSES).map(|c| c.try_into().expect("chunk of 4")).collect())
+    }
+}

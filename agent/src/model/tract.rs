@@ -1,0 +1,44 @@
+//! The tract runtime: each model is optimised once into a runnable plan shared by all
+//! robots; each robot spawns its own state from it.
+
+use super::{Input, LoadedModel, Runner};
+use anyhow::{Context, Result};
+use std::path::Path;
+use std::sync::Arc;
+use tract_onnx::prelude::*;
+
+pub struct TractModel {
+    plan: Arc<TypedRunnableModel>,
+}
+
+impl TractModel {
+    pub fn load(path: &Path) -> Result<Self> {
+        let plan = tract_onnx::onnx()
+            .model_for_path(path)
+            .and_then(|m| m.into_optimized())
+            .and_then(|m| m.into_runnable())
+            .with_context(|| format!("{}: tract cannot load and optimise this model", path.display()))?;
+        Ok(TractModel { plan })
+    }
+}
+
+impl LoadedModel for TractModel {
+    fn runner(&self) -> Result<Box<dyn Runner>> {
+        Ok(Box::new(TractRunner { state: self.plan.spawn()? }))
+    }
+}
+
+struct TractRunner {
+    state: TypedSimpleState,
+}
+
+impl Runner for TractRunner {
+    fn run(&mut self, inputs: &[Input<'_>]) -> Result<Vec<Vec<f32>>> {
+        let inputs = inputs
+            .iter()
+            .map(|i| Tensor::from_shape(i.shape, i.data).map(TValue::from))
+            .collect::<TractResult<TVec<_>>>()?;
+        let outputs = self.state.run(inputs)?;
+        outputs.iter().map(|o| Ok(o.to_plain_array_view::<f32>()?.iter().copied().collect())).collect()
+    }
+}

@@ -1,0 +1,185 @@
+//! Per-tick features → the GRU's input window (paper II-D, DESIGN "Temporal").
+//!
+//! Each decided tick leaves one row: the robot's own embedding, the mean of the peers'
+//! embeddings that arrived for that tick, and the worker's keypoints normalised by the
+//! image size to [0, 1]. A tick with no row (frame lost) or a part missing (worker not
+//! seen, no peer saw it) contributes zeros, which is how the models are trained to read
+//! absence. Rows are keyed by tick, so a window is always the W ticks ending at t, in
+//! order, whatever order the ticks were processed in.
+
+use spwi_proto::{EMBEDDING_DIM, KEYPOINT_VALUES};
+use std::collections::BTreeMap;
+
+/// Width of one ego-GRU row: own embedding ‖ keypoints.
+pub const EGO_DIM: usize = EMBEDDING_DIM + KEYPOINT_VALUES;
+/// Width of one collective-GRU row: own ‖ mean of peers ‖ keypoints.
+pub const COLLECTIVE_DIM: usize = 2 * EMBEDDING_DIM + KEYPOINT_VALUES;
+
+/// Which temporal model a robot runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TemporalModel {
+    /// Own observations only.
+    Ego,
+    /// Own observations plus the mean of the peers' embeddings.
+    Collective,
+}
+
+impl TemporalModel {
+    pub fn row_dim(self) -> usize {
+        match self {
+            TemporalModel::Ego => EGO_DIM,
+            TemporalModel::Collective => COLLECTIVE_DIM,
+        }
+    }
+}
+
+/// What one tick contributes to the window.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Row {
+    pub own: Option<Vec<f32>>,
+    pub peers_mean: Option<Vec<f32>>,
+    pub keypoints: Option<Vec<f32>>,
+}
+
+/// Normalises pixel keypoints by the image size, x by width and y by height.
+pub fn normalise_keypoints(keypoints: &[f32], image_size: [f32; 2]) -> Vec<f32> {
+    keypoints.iter().enumerate().map(|(i, &v)| v / image_size[i % 2]).collect()
+}
+
+/// The mean of the given embeddings, or `None` if there are none.
+pub fn mean<'a>(embeddings: impl IntoIterator<Item = &'a [f32]>) -> Option<Vec<f32>> {
+    let mut sum = vec![0.0f32; EMBEDDING_DIM];
+    let mut n = 0usize;
+    for e in embeddings {
+        for (s, v) in sum.iter_mut().zip(e) {
+            *s += v;
+        }
+        n += 1;
+    }
+    (n > 0).then(|| sum.into_iter().map(|s| s / n as f32).collect())
+}
+
+/// The last `len` ticks' rows.
+#[derive(Debug, Clone)]
+pub struct Window {
+    len: usize,
+    rows: BTreeMap<u64, Row>,
+}
+
+impl Window {
+    /// `len` ≥ 1 ticks.
+    pub fn new(len: usize) -> Self {
+        assert!(len >= 1, "a window holds at least one tick");
+        Window { len, rows: BTreeMap::new() }
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// Records tick `tick`'s row and forgets rows that no window ending at or after
+    /// `tick` can reach.
+    pub fn insert(&mut self, tick: u64, row: Row) {
+        self.rows.insert(tick, row);
+        let newest = self.rows.keys().next_back().copied().unwrap_or(tick);
+        let oldest = newest.saturating_sub(self.len as u64 - 1);
+        self.rows = self.rows.split_off(&oldest);
+    }
+
+    /// The flattened `[len, row_dim]` input for the window ending at `tick`, into `out`.
+    pub fn input(&self, tick: u64, model: TemporalModel, out: &mut Vec<f32>) {
+        let dim = model.row_dim();
+        out.clear();
+        out.resize(self.len * dim, 0.0);
+        let first = tick.saturating_sub(self.len as u64 - 1);
+        let offset = (self.len as u64 - 1 - (tick - first)) as usize; // left-pad early ticks
+        for (t, row) in self.rows.range(first..=tick) {
+            let at = (offset + (t - first) as usize) * dim;
+            let slot = &mut out[at..at + dim];
+            if let Some(e) = &row.own {
+                slot[..EMBEDDING_DIM].copy_from_slice(e);
+            }
+            let mut k = EMBEDDING_DIM;
+            if model == TemporalModel::Collective {
+                if let Some(p) = &row.peers_mean {
+                    slot[k..k + EMBEDDING_DIM].copy_from_slice(p);
+                }
+                k += EMBEDDING_DIM;
+            }
+            if let Some(kp) = &row.keypoints {
+                slot[k..k + KEYPOINT_VALUES].copy_from_slice(kp);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(v: f32) -> Row {
+        Row {
+            own: Some(vec![v; EMBEDDING_DIM]),
+            peers_mean: Some(vec![-v; EMBEDDING_DIM]),
+            keypoints: Some(vec![v / 10.0; KEYPOINT_VALUES]),
+        }
+    }
+
+    #[test]
+    fn ego_rows_are_own_then_keypoints_in_tick_order() {
+        let mut w = Window::new(3);
+        w.insert(11, row(2.0));
+        w.insert(10, row(1.0)); // out of order on purpose
+        w.insert(12, row(3.0));
+        let mut out = Vec::new();
+        w.input(12, TemporalModel::Ego, &mut out);
+        assert_eq!(out.len(), 3 * EGO_DIM);
+        for (i, v) in [1.0, 2.0, 3.0].into_iter().enumerate() {
+            assert_eq!(out[i * EGO_DIM], v);
+            assert_eq!(out[i * EGO_DIM + EMBEDDING_DIM], v / 10.0);
+        }
+    }
+
+    #[test]
+    fn collective_rows_carry_the_peer_mean_and_gaps_are_zero() {
+        let mut w = Window::new(3);
+        w.insert(5, row(1.0));
+        w.insert(7, Row { own: None, peers_mean: Some(vec![4.0; EMBEDDING_DIM]), keypoints: None });
+        let mut out = Vec::new();
+        w.input(7, TemporalModel::Collective, &mut out);
+        let d = COLLECTIVE_DIM;
+        assert_eq!(&out[..3], &[1.0, 1.0, 1.0]);
+        assert_eq!(out[EMBEDDING_DIM], -1.0);
+        assert!(out[d..2 * d].iter().all(|&v| v == 0.0), "tick 6 missing → zeros");
+        assert_eq!(out[2 * d], 0.0, "worker unseen at 7 → own zeros");
+        assert_eq!(out[2 * d + EMBEDDING_DIM], 4.0);
+    }
+
+    #[test]
+    fn early_ticks_are_left_padded_and_old_rows_forgotten() {
+        let mut w = Window::new(4);
+        w.insert(1, row(1.0));
+        let mut out = Vec::new();
+        w.input(1, TemporalModel::Ego, &mut out);
+        assert!(out[..3 * EGO_DIM].iter().all(|&v| v == 0.0));
+        assert_eq!(out[3 * EGO_DIM], 1.0);
+        for t in 2..100 {
+            w.insert(t, row(t as f32));
+        }
+        assert_eq!(w.rows.len(), 4);
+    }
+
+    #[test]
+    fn mean_and_keypoint_normalisation() {
+        let a = vec![1.0; EMBEDDING_DIM];
+        let b = vec![3.0; EMBEDDING_DIM];
+        assert_eq!(mean([a.as_slice(), b.as_slice()]).unwrap()[0], 2.0);
+        assert!(mean(std::iter::empty()).is_none());
+        assert_eq!(normalise_keypoints(&[64.0, 48.0], [640.0, 480.0]), vec![0.1, 0.1]);
+    }
+}

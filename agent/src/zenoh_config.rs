@@ -1,0 +1,73 @@
+//! Zenoh settings, shared by the agent and the simulated world: Zenoh's own json5 file
+//! (`--zenoh-config`, as `zenohd` takes it), then `--cfg KEY:VALUE` overrides.
+//!
+//! Without a file, spwi sets what membership needs: a 1000 ms link lease with
+//! keep-alive 4. A peer that is killed is seen at once (its TCP links close), but one
+//! that freezes, loses power or is unplugged is only seen when its lease runs out, so
+//! this bounds how long a silent robot stays in the vote (≈ 1 s). The departed peer's
+//! own lease is what counts: every robot must run the same one. A file given by the
+//! user is taken as is; set `transport/link/tx/lease` in it.
+
+use anyhow::{anyhow, bail, Result};
+use std::path::Path;
+
+/// Link lease every spwi process uses unless its Zenoh file says otherwise (ms).
+pub const LEASE_MS: u64 = 1000;
+/// Keep-alive messages per lease period.
+pub const KEEP_ALIVE: u64 = 4;
+
+/// Builds the Zenoh config from an optional json5 file and `KEY:VALUE` overrides
+/// (VALUE is json5, e.g. `mode:"peer"` or `listen/endpoints:["tcp/0.0.0.0:7447"]`).
+pub fn build(file: Option<&Path>, overrides: &[String]) -> Result<zenoh::Config> {
+    let mut c = match file {
+        Some(p) => zenoh::Config::from_file(p).map_err(|e| anyhow!("zenoh config {}: {e}", p.display()))?,
+        None => {
+            let mut c = zenoh::Config::default();
+            set(&mut c, "transport/link/tx/lease", &LEASE_MS.to_string())?;
+            set(&mut c, "transport/link/tx/keep_alive", &KEEP_ALIVE.to_string())?;
+            c
+        }
+    };
+    for o in overrides {
+        let Some((key, value)) = o.split_once(':') else {
+            bail!("--cfg {o:?}: expected KEY:VALUE, e.g. mode:\"peer\"");
+        };
+        set(&mut c, key, value)?;
+    }
+    Ok(c)
+}
+
+fn set(c: &mut zenoh::Config, key: &str, value: &str) -> Result<()> {
+    c.insert_json5(key, value).map_err(|e| anyhow!("zenoh setting {key} = {value}: {e}"))
+}
+
+/// A peer on loopback for tests and the in-process demo: listens on an ephemeral
+/// port, connects to `connect`, no multicast scouting.
+pub fn loopback_peer(connect: &[String]) -> Result<zenoh::Config> {
+    let mut c = build(None, &[])?;
+    set(&mut c, "mode", r#""peer""#)?;
+    set(&mut c, "listen/endpoints", r#"["tcp/127.0.0.1:0"]"#)?;
+    set(&mut c, "connect/endpoints", &serde_json::to_string(connect)?)?;
+    set(&mut c, "scouting/multicast/enabled", "false")?;
+    Ok(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_carry_the_short_lease_and_overrides_apply() {
+        let c = build(None, &["mode:\"client\"".to_owned()]).unwrap();
+        let lease = c.get_json("transport/link/tx/lease").unwrap();
+        assert_eq!(lease, "1000");
+        assert_eq!(c.get_json("mode").unwrap(), "\"client\"");
+    }
+
+    #[test]
+    fn malformed_overrides_are_refused_with_the_key() {
+        assert!(build(None, &["no-colon".to_owned()]).unwrap_err().to_string().contains("KEY:VALUE"));
+        let e = build(None, &["transport/link/tx/lease:\"soon\"".to_owned()]).unwrap_err().to_string();
+        assert!(e.contains("transport/link/tx/lease"), "{e}");
+    }
+}
