@@ -11,7 +11,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AgentConfig {
     pub tick: TickConfig,
@@ -50,7 +50,7 @@ pub struct ModelsConfig {
     pub ort_library: Option<PathBuf>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct HttpConfig {
     /// Address for `/healthz`, `/status` and `/metrics`; none to serve nothing.
@@ -91,26 +91,9 @@ impl Default for ModelsConfig {
     }
 }
 
-impl Default for HttpConfig {
-    fn default() -> Self {
-        HttpConfig { listen: None }
-    }
-}
-
 impl Default for LogConfig {
     fn default() -> Self {
         LogConfig { format: LogFormat::Human }
-    }
-}
-
-impl Default for AgentConfig {
-    fn default() -> Self {
-        AgentConfig {
-            tick: TickConfig::default(),
-            models: ModelsConfig::default(),
-            http: HttpConfig::default(),
-            log: LogConfig::default(),
-        }
     }
 }
 

@@ -97,8 +97,14 @@ mod tests {
         let sa = [sv(0, 0.9), sv(1, 0.9)];
         let sb = [sv(0, 0.2), sv(2, 0.3)];
         let w = Weights { alpha: 0.5, beta: 0.5 };
-        let one = decide(&mut [Ballot { robot: &a, visibility: 2, steps: &sa }, Ballot { robot: &b, visibility: 2, steps: &sb }], w);
-        let two = decide(&mut [Ballot { robot: &b, visibility: 2, steps: &sb }, Ballot { robot: &a, visibility: 2, steps: &sa }], w);
+        let one = decide(
+            &mut [Ballot { robot: &a, visibility: 2, steps: &sa }, Ballot { robot: &b, visibility: 2, steps: &sb }],
+            w,
+        );
+        let two = decide(
+            &mut [Ballot { robot: &b, visibility: 2, steps: &sb }, Ballot { robot: &a, visibility: 2, steps: &sa }],
+            w,
+        );
         assert_eq!(one, two);
         assert_eq!(one.iter().map(|s| s.class).collect::<Vec<_>>(), vec![0, 1]);
     }

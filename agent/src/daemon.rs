@@ -140,9 +140,11 @@ pub async fn run(
     drop(tx);
 
     let publish = |t: Topic| keys::robot_topic(&fleet, &robot, t);
-    let pub_embedding = session.declare_publisher(publish(Topic::Embedding)).express(true).await.map_err(|e| anyhow!(e))?;
+    let pub_embedding =
+        session.declare_publisher(publish(Topic::Embedding)).express(true).await.map_err(|e| anyhow!(e))?;
     let pub_vote = session.declare_publisher(publish(Topic::Vote)).express(true).await.map_err(|e| anyhow!(e))?;
-    let pub_decision = session.declare_publisher(publish(Topic::Decision)).express(true).await.map_err(|e| anyhow!(e))?;
+    let pub_decision =
+        session.declare_publisher(publish(Topic::Decision)).express(true).await.map_err(|e| anyhow!(e))?;
 
     let status: SharedStatus = Arc::new(Mutex::new(Status {
         robot: robot.to_string(),
@@ -249,21 +251,28 @@ async fn sleep_until(deadline: Option<tokio::time::Instant>) {
     }
 }
 
-/// Refuses to start when a live daemon already holds our liveliness token.
+/// Refuses to start when a live daemon already holds our liveliness token. Peers only
+/// answer for themselves and the mesh takes a moment to form after `open`, so the
+/// question is asked a few times over about a second before the token is declared.
 async fn refuse_duplicate(session: &zenoh::Session, alive_key: &str, robot: &RobotId) -> Result<()> {
-    let replies = session.liveliness().get(alive_key).await.map_err(|e| anyhow!("{alive_key}: {e}"))?;
-    let found = tokio::time::timeout(Duration::from_secs(2), async {
-        while let Ok(reply) = replies.recv_async().await {
-            if reply.result().is_ok() {
-                return true;
-            }
+    for attempt in 0..4 {
+        if attempt > 0 {
+            tokio::time::sleep(Duration::from_millis(300)).await;
         }
-        false
-    })
-    .await
-    .unwrap_or(false);
-    if found {
-        bail!("robot id {robot:?} is already in use by a live daemon of this fleet ({alive_key}); give each robot a unique --robot-id");
+        let replies = session.liveliness().get(alive_key).await.map_err(|e| anyhow!("{alive_key}: {e}"))?;
+        let found = tokio::time::timeout(Duration::from_secs(1), async {
+            while let Ok(reply) = replies.recv_async().await {
+                if reply.result().is_ok() {
+                    return true;
+                }
+            }
+            false
+        })
+        .await
+        .unwrap_or(false);
+        if found {
+            bail!("robot id \"{robot}\" is already in use by a live daemon of this fleet ({alive_key}); give each robot a unique --robot-id");
+        }
     }
     Ok(())
 }

@@ -481,7 +481,9 @@ mod tests {
     }
 
     fn take_embedding(out: &[Output]) -> EmbeddingMsg {
-        out.iter().find_map(|o| if let Output::Embedding(e) = o { Some(e.clone()) } else { None }).expect("an embedding")
+        out.iter()
+            .find_map(|o| if let Output::Embedding(e) = o { Some(e.clone()) } else { None })
+            .expect("an embedding")
     }
 
     #[test]
@@ -549,7 +551,10 @@ mod tests {
         let mut a = engine("a", &set);
         a.handle(Input::MemberJoined(id("b")), ms(0));
         a.handle(Input::Frame(frame("a", 1, true)), ms(0));
-        a.handle(Input::Embedding(EmbeddingMsg { robot: id("b"), instance: 9, tick: 1, embedding: None, visibility: 0 }), ms(1));
+        a.handle(
+            Input::Embedding(EmbeddingMsg { robot: id("b"), instance: 9, tick: 1, embedding: None, visibility: 0 }),
+            ms(1),
+        );
         let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
         assert!(decisions(&out).is_empty());
         assert_eq!(a.next_deadline(), Some(ms(130)));
@@ -569,11 +574,17 @@ mod tests {
         a.handle(Input::Frame(frame("a", 1, true)), ms(0));
         for r in ["b", "c"] {
             a.handle(Input::MemberJoined(id(r)), ms(0));
-            a.handle(Input::Embedding(EmbeddingMsg { robot: id(r), instance: 9, tick: 1, embedding: None, visibility: 0 }), ms(0));
+            a.handle(
+                Input::Embedding(EmbeddingMsg { robot: id(r), instance: 9, tick: 1, embedding: None, visibility: 0 }),
+                ms(0),
+            );
         }
         a.handle(Input::Frame(frame("a", 2, true)), ms(100));
         // c does not see the worker: its vote is not expected.
-        a.handle(Input::Embedding(EmbeddingMsg { robot: id("c"), instance: 9, tick: 2, embedding: None, visibility: 1 }), ms(101));
+        a.handle(
+            Input::Embedding(EmbeddingMsg { robot: id("c"), instance: 9, tick: 2, embedding: None, visibility: 1 }),
+            ms(101),
+        );
         let out = a.handle(Input::MemberLeft(id("b")), ms(102));
         take_vote(&out);
         let d = decisions(&out);
@@ -600,7 +611,16 @@ mod tests {
         assert!(a.handle(Input::Frame(frame("a", 1, true)), ms(1)).is_empty());
         assert_eq!(a.metrics.stale_frames, 1);
         for t in 100..120 {
-            a.handle(Input::Vote(VoteMsg { robot: id("z"), instance: 3, tick: t, steps: vec![StepVote { class: 0, confidence: 1.0 }], visibility: 1 }), ms(2));
+            a.handle(
+                Input::Vote(VoteMsg {
+                    robot: id("z"),
+                    instance: 3,
+                    tick: t,
+                    steps: vec![StepVote { class: 0, confidence: 1.0 }],
+                    visibility: 1,
+                }),
+                ms(2),
+            );
         }
         assert_eq!(a.open.len(), 8);
         assert_eq!(a.metrics.evicted_ticks, 12);

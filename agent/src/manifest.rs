@@ -86,7 +86,8 @@ impl Manifest {
     /// and checks every ONNX file against it.
     pub fn load(dir: &Path) -> Result<Manifest, ManifestError> {
         let path = dir.join("manifest.json");
-        let text = std::fs::read_to_string(&path).map_err(|source| ManifestError::Read { path: path.clone(), source })?;
+        let text =
+            std::fs::read_to_string(&path).map_err(|source| ManifestError::Read { path: path.clone(), source })?;
         let m: Manifest =
             serde_json::from_str(&text).map_err(|source| ManifestError::Parse { path: path.clone(), source })?;
         m.check_interface(&path)?;
@@ -102,7 +103,10 @@ impl Manifest {
         if self.classes.len() != NUM_CLASSES {
             return bad(format!("{} classes, the daemon predicts {NUM_CLASSES}", self.classes.len()));
         }
-        if !(1..=256).contains(&self.max_nodes) || !(1..=600).contains(&self.window) || self.horizon >= spwi_proto::MAX_STEPS {
+        if !(1..=256).contains(&self.max_nodes)
+            || !(1..=600).contains(&self.window)
+            || self.horizon >= spwi_proto::MAX_STEPS
+        {
             return bad(format!(
                 "max_nodes {} (1..=256), window {} (1..=600) or horizon {} (0..{}) out of range",
                 self.max_nodes,
@@ -123,7 +127,12 @@ impl Manifest {
             }
             Ok(())
         };
-        expect(&self.models.gcn, "gcn", &[&[1, n, NODE_FEATURE_DIM], &[1, n, n]], &[&[1, EMBEDDING_DIM], &[1, NUM_CLASSES]])?;
+        expect(
+            &self.models.gcn,
+            "gcn",
+            &[&[1, n, NODE_FEATURE_DIM], &[1, n, n]],
+            &[&[1, EMBEDDING_DIM], &[1, NUM_CLASSES]],
+        )?;
         expect(&self.models.ego_gru, "ego_gru", &[&[1, w, EGO_DIM]], &[&[1, steps, NUM_CLASSES]])?;
         expect(&self.models.collective_gru, "collective_gru", &[&[1, w, COLLECTIVE_DIM]], &[&[1, steps, NUM_CLASSES]])?;
         for (what, spec) in [("ego_gru", &self.models.ego_gru), ("collective_gru", &self.models.collective_gru)] {

@@ -8,7 +8,8 @@ use std::fmt::Write;
 use std::time::Duration;
 
 /// Bucket upper bounds in seconds: 50 µs … 1 s.
-const BOUNDS: [f64; 14] = [50e-6, 100e-6, 200e-6, 500e-6, 1e-3, 2e-3, 5e-3, 10e-3, 20e-3, 50e-3, 100e-3, 200e-3, 500e-3, 1.0];
+const BOUNDS: [f64; 14] =
+    [50e-6, 100e-6, 200e-6, 500e-6, 1e-3, 2e-3, 5e-3, 10e-3, 20e-3, 50e-3, 100e-3, 200e-3, 500e-3, 1.0];
 
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Histogram {
@@ -138,10 +139,18 @@ impl Metrics {
             ("spwi_frames_total", "detection frames processed", self.frames),
             ("spwi_frames_with_worker_total", "frames in which the worker was seen", self.frames_with_worker),
             ("spwi_decisions_total", "team decisions published", self.decisions),
-            ("spwi_decisions_by_deadline_total", "decisions taken when the deadline passed", self.decisions_by_deadline),
+            (
+                "spwi_decisions_by_deadline_total",
+                "decisions taken when the deadline passed",
+                self.decisions_by_deadline,
+            ),
             ("spwi_late_messages_total", "peer messages for an already decided tick", self.late_messages),
             ("spwi_stale_frames_total", "frames for an already decided tick", self.stale_frames),
-            ("spwi_duplicate_id_messages_total", "messages from another daemon using our robot id", self.duplicate_id_messages),
+            (
+                "spwi_duplicate_id_messages_total",
+                "messages from another daemon using our robot id",
+                self.duplicate_id_messages,
+            ),
             ("spwi_evicted_ticks_total", "open ticks dropped for lack of room", self.evicted_ticks),
             ("spwi_model_errors_total", "failed model runs", self.model_errors),
             ("spwi_agreement_compared_total", "peer decisions compared with ours", self.agreement_compared),
@@ -152,7 +161,10 @@ impl Metrics {
         let _ = writeln!(o, "# HELP spwi_agreement_same_total peer decisions equal to ours\n# TYPE spwi_agreement_same_total counter\nspwi_agreement_same_total{{{l}}} {}", self.agreement_same);
         let _ = writeln!(o, "# HELP spwi_agreement share of peer decisions equal to ours\n# TYPE spwi_agreement gauge\nspwi_agreement{{{l}}} {}", self.agreement());
         let _ = writeln!(o, "# HELP spwi_members live members counted, this robot included\n# TYPE spwi_members gauge\nspwi_members{{{l}}} {members}");
-        let _ = writeln!(o, "# HELP spwi_bad_messages_total messages refused, by reason\n# TYPE spwi_bad_messages_total counter");
+        let _ = writeln!(
+            o,
+            "# HELP spwi_bad_messages_total messages refused, by reason\n# TYPE spwi_bad_messages_total counter"
+        );
         for (reason, v) in &self.bad_messages {
             let _ = writeln!(o, "spwi_bad_messages_total{{{l},reason=\"{reason}\"}} {v}");
         }

@@ -6,9 +6,9 @@
 //! - `ort`: ONNX Runtime, loaded at run time from the `onnxruntime` wheel's shared
 //!   library (cargo feature `ort`), so nothing is downloaded at build time.
 
-mod tract;
 #[cfg(feature = "ort")]
 mod ort;
+mod tract;
 
 use crate::graph::StarGraph;
 use crate::manifest::{Manifest, ModelSpec};
@@ -157,7 +157,8 @@ impl Inference {
             Input { shape: &[1, n, crate::graph::NODE_FEATURE_DIM], data: &g.x },
             Input { shape: &[1, n, n], data: &g.adj },
         ])?;
-        let [embedding, logits] = <[Vec<f32>; 2]>::try_from(out).map_err(|o| anyhow::anyhow!("gcn gave {} outputs", o.len()))?;
+        let [embedding, logits] =
+            <[Vec<f32>; 2]>::try_from(out).map_err(|o| anyhow::anyhow!("gcn gave {} outputs", o.len()))?;
         if embedding.len() != EMBEDDING_DIM || logits.len() != NUM_CLASSES {
             bail!("gcn gave an embedding of {} and {} logits", embedding.len(), logits.len());
         }

@@ -1,0 +1,133 @@
+//! Golden tests: every runtime reproduces the outputs onnxruntime-Python gave for the
+//! reference inputs shipped beside the models (`reference.json`), within 1e-4; and a
+//! model set that does not match its manifest is refused with an error naming the
+//! file, the tensor and both shapes.
+//!
+//! The ort runtime is checked when built with `--features ort`; it then needs
+//! `ORT_DYLIB_PATH` (`.ci/run` sets it to the onnxruntime wheel's library).
+
+use spwi_agent::model::{Backend, Input, ModelSet};
+use std::path::{Path, PathBuf};
+
+const TOLERANCE: f32 = 1e-4;
+
+fn model_sets() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let mut sets: Vec<PathBuf> = std::fs::read_dir(&root)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("manifest.json").is_file() && p.join("reference.json").is_file())
+        .collect();
+    sets.sort();
+    assert!(!sets.is_empty(), "no model set with reference.json under {}", root.display());
+    sets
+}
+
+fn check_backend(backend: Backend) {
+    for dir in model_sets() {
+        let set = ModelSet::load(&dir, backend, None).unwrap_or_else(|e| panic!("{}: {e:#}", dir.display()));
+        let reference: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
+        for name in ["gcn", "ego_gru", "collective_gru"] {
+            let spec = match name {
+                "gcn" => &set.manifest.models.gcn,
+                "ego_gru" => &set.manifest.models.ego_gru,
+                _ => &set.manifest.models.collective_gru,
+            };
+            let floats = |v: &serde_json::Value| -> Vec<f32> {
+                v["data"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect()
+            };
+            let inputs: Vec<(Vec<usize>, Vec<f32>)> =
+                spec.inputs.iter().map(|t| (t.shape.clone(), floats(&reference[name]["inputs"][&t.name]))).collect();
+            let feed: Vec<Input<'_>> = inputs.iter().map(|(s, d)| Input { shape: s, data: d }).collect();
+            let got = set.runner(name).unwrap().run(&feed).unwrap();
+            for (out, spec_out) in got.iter().zip(&spec.outputs) {
+                let want = floats(&reference[name]["outputs"][&spec_out.name]);
+                assert_eq!(out.len(), want.len(), "{name}.{}", spec_out.name);
+                let worst = out.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                assert!(
+                    worst <= TOLERANCE,
+                    "{} {backend:?} {name}.{}: max deviation {worst} > {TOLERANCE}",
+                    dir.display(),
+                    spec_out.name
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn tract_matches_onnxruntime_python() {
+    check_backend(Backend::Tract);
+}
+
+#[cfg(feature = "ort")]
+#[test]
+fn ort_matches_onnxruntime_python() {
+    assert!(
+        std::env::var_os("ORT_DYLIB_PATH").is_some(),
+        "built with the ort feature but ORT_DYLIB_PATH is not set: point it at the onnxruntime wheel's libonnxruntime.so"
+    );
+    check_backend(Backend::Ort);
+}
+
+#[cfg(not(feature = "ort"))]
+#[test]
+fn ort_backend_without_the_feature_is_a_clear_error() {
+    let dir = &model_sets()[0];
+    let e = ModelSet::load(dir, Backend::Ort, None).unwrap_err().to_string();
+    assert!(e.contains("--features ort"), "{e}");
+}
+
+/// A copy of the fixture set in a fresh temporary folder, for tampering.
+fn fixture_copy(tag: &str) -> PathBuf {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
+    let dst = std::env::temp_dir().join(format!("spwi-golden-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dst);
+    std::fs::create_dir_all(&dst).unwrap();
+    for f in ["manifest.json", "gcn.onnx", "ego_gru.onnx", "collective_gru.onnx"] {
+        std::fs::copy(src.join(f), dst.join(f)).unwrap();
+    }
+    dst
+}
+
+#[test]
+fn a_manifest_that_lies_about_a_shape_is_refused_naming_file_tensor_and_shapes() {
+    let dir = fixture_copy("shape");
+    let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    // The ONNX GCN is built for 16 nodes; claim 12 everywhere so the interface is
+    // self-consistent and only the file disagrees.
+    m["max_nodes"] = 12.into();
+    m["models"]["gcn"]["inputs"][0]["shape"] = serde_json::json!([1, 12, 1024]);
+    m["models"]["gcn"]["inputs"][1]["shape"] = serde_json::json!([1, 12, 12]);
+    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(
+        e.contains("gcn.onnx") && e.contains("\"x\"") && e.contains("[1, 16, 1024]") && e.contains("[1, 12, 1024]"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn a_wrong_model_file_is_refused() {
+    let dir = fixture_copy("swap");
+    std::fs::copy(dir.join("ego_gru.onnx"), dir.join("collective_gru.onnx")).unwrap();
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("collective_gru.onnx") && e.contains("[1, 20, 290]") && e.contains("[1, 20, 162]"), "{e}");
+    std::fs::write(dir.join("gcn.onnx"), b"not an onnx file").unwrap();
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("gcn.onnx"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn a_manifest_inconsistent_with_the_daemon_is_refused() {
+    let dir = fixture_copy("window");
+    let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    std::fs::write(dir.join("manifest.json"), text.replace("\"window\": 20", "\"window\": 30")).unwrap();
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("ego_gru") && e.contains("window 30"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

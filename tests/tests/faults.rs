@@ -1,0 +1,160 @@
+//! Faults, with agents as real processes where the fault is a process's: SIGKILL (the
+//! kernel closes its links: seen at once) and SIGSTOP (frozen, links stay open: seen
+//! only when its Zenoh lease runs out, ≈ 1 s), then SIGCONT (it comes back). Also bad
+//! input on every key and a second daemon with a taken robot id.
+//! Run: `cargo test -p spwi-tests --test faults -- --nocapture` to see the timings.
+
+use spwi_agent::config::AgentConfig;
+use spwi_proto::keys::{self, Topic};
+use spwi_proto::*;
+use spwi_tests::*;
+use std::time::{Duration, Instant};
+
+const EXE: &str = env!("CARGO_BIN_EXE_spwi-test-agent");
+const TICK: Duration = Duration::from_millis(100);
+
+/// Three agent processes deciding; returns them once all count 3 members.
+async fn three_processes(hub: &Hub, collector: &Collector) -> Vec<ProcessAgent> {
+    let ids: Vec<_> = (0..3).map(|i| id(&format!("p{i}"))).collect();
+    let agents: Vec<_> = ids.iter().map(|r| ProcessAgent::start(EXE, hub, r)).collect();
+    collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(15)).await;
+    agents
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_killed_agent_is_out_within_1_5_s_and_decisions_go_on() {
+    within!(60, "test", async {
+        let hub = Hub::start("kill").await.unwrap();
+        let collector = Collector::start(&hub).await.unwrap();
+        let ids: Vec<_> = (0..3).map(|i| id(&format!("p{i}"))).collect();
+        let publisher = Publisher::start(&hub, ids.clone(), TICK);
+        let mut agents = three_processes(&hub, &collector).await;
+        let victim = agents.pop().unwrap();
+        let (t0, tick0) = (Instant::now(), publisher.current_tick());
+        victim.signal("KILL");
+        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await;
+        eprintln!("SIGKILL seen in {took:?}");
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        let tick1 = publisher.current_tick();
+        for r in &ids[..2] {
+            assert!(collector.longest_gap(r, tick0 + 1, tick1 - 1) <= 1, "{r} stopped deciding");
+        }
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_frozen_agent_is_out_within_1_5_s_and_back_after_sigcont() {
+    within!(60, "test", async {
+        let hub = Hub::start("freeze").await.unwrap();
+        let collector = Collector::start(&hub).await.unwrap();
+        let ids: Vec<_> = (0..3).map(|i| id(&format!("p{i}"))).collect();
+        let publisher = Publisher::start(&hub, ids.clone(), TICK);
+        let agents = three_processes(&hub, &collector).await;
+        let (t0, tick0) = (Instant::now(), publisher.current_tick());
+        agents[2].signal("STOP");
+        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await;
+        eprintln!("SIGSTOP seen in {took:?}");
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let tick1 = publisher.current_tick();
+        for r in &ids[..2] {
+            assert!(collector.longest_gap(r, tick0 + 1, tick1 - 1) <= 1, "{r} stopped deciding while p2 was frozen");
+        }
+        let t1 = Instant::now();
+        agents[2].signal("CONT");
+        let took = collector.wait_members(&ids, 3, t1, Duration::from_secs(10)).await;
+        eprintln!("SIGCONT: back in {took:?}");
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on() {
+    within!(60, "test", async {
+        let hub = Hub::start("bad").await.unwrap();
+        let models = models();
+        let collector = Collector::start(&hub).await.unwrap();
+        let ids = vec![id("a"), id("b")];
+        let a = InProcessAgent::start(&hub, &ids[0], &models, AgentConfig::default()).await;
+        let b = InProcessAgent::start(&hub, &ids[1], &models, AgentConfig::default()).await;
+        let publisher = Publisher::start(&hub, ids.clone(), TICK);
+        collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(5)).await;
+
+        // One of each kind of bad input, on every key the agents read.
+        let good_vote = VoteMsg {
+            robot: id("b"),
+            instance: 1,
+            tick: 1,
+            steps: vec![StepVote { class: 1, confidence: 0.5 }],
+            visibility: 1,
+        };
+        let mut wrong_version = encode(&good_vote);
+        wrong_version[0] = 99;
+        let mut truncated = encode(&scripted_frame(&ids[0], 0, 1));
+        truncated.truncate(truncated.len() / 2);
+        let nan_embedding = encode(&EmbeddingMsg {
+            robot: id("b"),
+            instance: 1,
+            tick: 1,
+            embedding: Some(vec![f32::NAN; EMBEDDING_DIM]),
+            visibility: 1,
+        });
+        let spoofed = encode(&VoteMsg { robot: id("mallory"), ..good_vote.clone() });
+        let bads: Vec<(&str, Vec<u8>)> = vec![
+            ("garbage", vec![0xde, 0xad, 0xbe, 0xef]),
+            ("empty", vec![]),
+            ("truncated", truncated),
+            ("wrong version", wrong_version),
+            ("oversized", vec![1u8; MAX_MESSAGE_BYTES + 1]),
+            ("nan", nan_embedding),
+            ("spoofed", spoofed),
+        ];
+        let tick0 = publisher.current_tick();
+        for topic in Topic::ALL {
+            for (_, bytes) in &bads {
+                let key = keys::robot_topic(&hub.fleet, &ids[1], topic);
+                hub.session.put(&key, bytes.clone()).await.unwrap();
+                let key = keys::robot_topic(&hub.fleet, &ids[0], topic);
+                hub.session.put(&key, bytes.clone()).await.unwrap();
+            }
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        let tick1 = publisher.current_tick();
+        let status = a.started.status.lock().unwrap().clone();
+        let bad = status.metrics.bad_total();
+        // a reads its own detections and everyone's embedding, vote and decision keys:
+        // 7 bad payloads on 2 robots' keys for 3 topics + on its own detections.
+        assert!(bad >= 7 * 7, "only {bad} bad messages counted: {:?}", status.metrics.bad_messages);
+        for reason in ["malformed", "version", "too_large", "invalid", "robot_mismatch"] {
+            assert!(
+                status.metrics.bad_messages.get(reason).copied().unwrap_or(0) > 0,
+                "no {reason}: {:?}",
+                status.metrics.bad_messages
+            );
+        }
+        for r in &ids {
+            assert!(collector.longest_gap(r, tick0 + 1, tick1 - 1) <= 1, "{r} stopped deciding under bad input");
+        }
+        a.stop().await;
+        b.stop().await;
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_second_daemon_with_a_taken_robot_id_is_refused() {
+    within!(60, "test", async {
+        let hub = Hub::start("dup").await.unwrap();
+        let models = models();
+        let a = InProcessAgent::start(&hub, &id("same"), &models, AgentConfig::default()).await;
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let mut second = ProcessAgent::start(EXE, &hub, &id("same"));
+        let status = within!(20, "the second daemon to exit", async {
+            loop {
+                if let Some(s) = second.child.try_wait().unwrap() {
+                    break s;
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        });
+        assert!(!status.success(), "a daemon with a taken robot id must refuse to start");
+        a.stop().await;
+    });
+}

@@ -1,0 +1,126 @@
+//! The fleet on loopback: real Zenoh peers, real agents (in-process, each with its own
+//! session), the fixture models, a scripted detection publisher at 10 Hz.
+//!
+//! Covers: every agent decides every tick and all agree (1, 3 and 8 agents); an agent
+//! that leaves gracefully is out of the member count within 1.5 s and the others go on
+//! without a gap; an agent that joins mid-run is counted within a second and decides.
+//! Run: `cargo test -p spwi-tests --test fleet`.
+
+use spwi_agent::config::AgentConfig;
+use spwi_tests::*;
+use std::time::{Duration, Instant};
+
+const TICK: Duration = Duration::from_millis(100);
+
+fn robots(n: usize) -> Vec<spwi_proto::RobotId> {
+    (0..n).map(|i| id(&format!("r{i}"))).collect()
+}
+
+/// Starts n agents, runs `ticks` ticks, and checks every agent decided every tick of
+/// the second half and that their decisions agree on ≥ 99 % of those ticks.
+async fn decide_together(n: usize, ticks: u64) {
+    let hub = Hub::start(&format!("together{n}")).await.unwrap();
+    let models = models();
+    let collector = Collector::start(&hub).await.unwrap();
+    let ids = robots(n);
+    let mut agents = Vec::new();
+    for r in &ids {
+        agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+    }
+    tokio::time::sleep(Duration::from_millis(700)).await; // mesh and membership settle
+    let publisher = Publisher::start(&hub, ids.clone(), TICK);
+    within!(ticks as f64 * 0.1 + 30.0, "ticks to pass", async {
+        while publisher.current_tick() < ticks + 3 {
+            tokio::time::sleep(TICK).await;
+        }
+    });
+    drop(publisher);
+    tokio::time::sleep(Duration::from_millis(300)).await;
+
+    let by = collector.by_robot();
+    let checked = ticks / 2..=ticks;
+    let mut same = 0;
+    for t in checked.clone() {
+        let classes: Vec<_> = ids
+            .iter()
+            .map(|r| {
+                let d = by.get(r).and_then(|m| m.get(&t)).unwrap_or_else(|| panic!("{r} did not decide tick {t}"));
+                assert_eq!(d.live_members, n as u32, "{r} at tick {t}");
+                d.steps.first().map(|s| s.class)
+            })
+            .collect();
+        same += u64::from(classes.windows(2).all(|w| w[0] == w[1]));
+    }
+    let total = checked.count() as u64;
+    assert!(same * 100 >= total * 99, "{n} agents agreed on only {same} of {total} ticks");
+    for a in agents {
+        a.stop().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn one_agent_decides_every_tick() {
+    within!(60, "test", decide_together(1, 30));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn three_agents_decide_every_tick_and_agree() {
+    within!(90, "test", decide_together(3, 40));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn eight_agents_decide_every_tick_and_agree() {
+    within!(120, "test", decide_together(8, 40));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_graceful_leave_and_a_join_change_the_members_and_decisions_go_on() {
+    within!(90, "test", async {
+        let hub = Hub::start("churn").await.unwrap();
+        let models = models();
+        let collector = Collector::start(&hub).await.unwrap();
+        let ids = robots(4);
+        let mut agents = Vec::new();
+        for r in &ids[..3] {
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+        }
+        let _publisher = Publisher::start(&hub, ids.clone(), TICK);
+        collector.wait_members(&ids[..3], 3, Instant::now(), Duration::from_secs(5)).await;
+
+        // r2 leaves gracefully.
+        let leaver = agents.pop().unwrap();
+        let t0 = Instant::now();
+        let tick0 = _publisher.current_tick();
+        leaver.stop().await;
+        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await;
+        eprintln!("graceful leave seen in {took:?}");
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let tick1 = _publisher.current_tick();
+        for r in &ids[..2] {
+            assert!(collector.longest_gap(r, tick0, tick1 - 1) <= 1, "{r} stopped deciding when r2 left");
+        }
+
+        // r3 joins and is counted within a second, and decides.
+        let t1 = Instant::now();
+        agents.push(InProcessAgent::start(&hub, &ids[3], &models, AgentConfig::default()).await);
+        let ours = [ids[0].clone(), ids[1].clone(), ids[3].clone()];
+        let took = collector.wait_members(&ours, 3, t1, Duration::from_secs(1)).await;
+        eprintln!("join seen in {took:?}");
+        // and its vote counts: soon every decision lists three voters
+        within!(5, "the newcomer's vote to be counted", async {
+            loop {
+                let seen = collector.seen.lock().unwrap().clone();
+                if seen.iter().rev().take(6).all(|s| s.msg.voters.len() == 3 || s.msg.steps.is_empty())
+                    && seen.len() > 6
+                {
+                    break;
+                }
+                drop(seen);
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        });
+        for a in agents {
+            a.stop().await;
+        }
+    });
+}
