@@ -17,8 +17,8 @@ use tokio::sync::watch;
 #[command(name = "spwi-agent", version)]
 pub struct Args {
     /// This robot's id ([A-Za-z0-9_-]{1,64}); unique within the fleet.
-    #[arg(long, env = "SPWI_ROBOT_ID")]
-    pub robot_id: RobotId,
+    #[arg(long, env = "SPWI_ROBOT_ID", required_unless_present = "replay")]
+    pub robot_id: Option<RobotId>,
     /// The fleet (team) to join.
     #[arg(long, env = "SPWI_FLEET", default_value = "default")]
     pub fleet: FleetId,
@@ -38,6 +38,13 @@ pub struct Args {
     /// Model set folder (overrides models.dir).
     #[arg(long)]
     pub models: Option<PathBuf>,
+    /// Record every input and output of the decision engine to this MCAP file.
+    #[arg(long, value_name = "FILE")]
+    pub record: Option<PathBuf>,
+    /// Do not join a fleet: replay a recording through the same models and check that
+    /// every output is what was recorded, bit for bit.
+    #[arg(long, value_name = "FILE", conflicts_with = "record")]
+    pub replay: Option<PathBuf>,
 }
 
 /// Sets up `tracing`: `RUST_LOG` wins; otherwise info for spwi and only warnings and
@@ -101,6 +108,10 @@ async fn run(args: Args) -> Result<()> {
     }
     init_tracing(config.log.format);
     config.validate()?;
+    if let Some(file) = args.replay {
+        return replay(&file, &config);
+    }
+    let robot = args.robot_id.context("--robot-id is required")?;
     let zenoh = crate::zenoh_config::build(args.zenoh_config.as_deref(), &args.cfg)?;
     let models = tokio::task::spawn_blocking({
         let config = config.clone();
@@ -110,7 +121,33 @@ async fn run(args: Args) -> Result<()> {
     .context("model loading panicked")??;
     let (tx, rx) = watch::channel(false);
     spawn_signal_handler(tx);
-    daemon::run(Options { robot: args.robot_id, fleet: args.fleet, config, zenoh }, models, rx, None).await
+    daemon::run(Options { robot, fleet: args.fleet, config, zenoh, record: args.record }, models, rx, None).await
+}
+
+fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {
+    let recording = crate::record::read(file)?;
+    let models = daemon::load_models(config)?;
+    let replayed = crate::record::replay(&recording, &models)?;
+    let decisions = replayed.iter().filter(|o| matches!(o, crate::engine::Output::Decision(_))).count();
+    if replayed != recording.outputs {
+        let at = replayed
+            .iter()
+            .zip(&recording.outputs)
+            .position(|(a, b)| a != b)
+            .unwrap_or(replayed.len().min(recording.outputs.len()));
+        anyhow::bail!(
+            "replay differs from the recording at output {at} ({} replayed, {} recorded)",
+            replayed.len(),
+            recording.outputs.len()
+        );
+    }
+    println!(
+        "replayed {} inputs of robot {}: {} outputs, {decisions} decisions, identical to the recording",
+        recording.inputs.len(),
+        recording.config.engine.robot,
+        replayed.len()
+    );
+    Ok(())
 }
 
 /// `main` of `spwi-agent`.

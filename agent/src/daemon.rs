@@ -15,6 +15,7 @@ use crate::config::AgentConfig;
 use crate::consensus::Weights;
 use crate::engine::{Engine, EngineConfig, Input, Output};
 use crate::model::ModelSet;
+use crate::record::{RecordedConfig, Recorder};
 use crate::status::{SharedStatus, Status};
 use anyhow::{anyhow, bail, Result};
 use spwi_proto::keys::{self, Topic};
@@ -31,6 +32,8 @@ pub struct Options {
     pub fleet: FleetId,
     pub config: AgentConfig,
     pub zenoh: zenoh::Config,
+    /// Record every input and output of the engine to this MCAP file.
+    pub record: Option<std::path::PathBuf>,
 }
 
 /// A message as the Zenoh callbacks hand it to the loop.
@@ -71,7 +74,7 @@ pub async fn run(
     mut shutdown: watch::Receiver<bool>,
     ready: Option<tokio::sync::oneshot::Sender<Started>>,
 ) -> Result<()> {
-    let Options { robot, fleet, config, zenoh } = opts;
+    let Options { robot, fleet, config, zenoh, record } = opts;
     config.validate()?;
     let instance = random_instance();
     let m = &models.manifest;
@@ -79,18 +82,22 @@ pub async fn run(
         alpha: config.tick.alpha.unwrap_or(m.consensus.alpha),
         beta: config.tick.beta.unwrap_or(m.consensus.beta),
     };
-    let mut engine = Engine::new(
-        EngineConfig {
-            robot: robot.clone(),
-            instance,
-            temporal: config.tick.temporal,
-            embedding_wait: config.embedding_wait(),
-            decision_deadline: config.decision_deadline(),
-            weights,
-            max_open_ticks: config.tick.max_open_ticks,
-        },
-        models.inference(config.tick.temporal)?,
-    );
+    let engine_config = EngineConfig {
+        robot: robot.clone(),
+        instance,
+        temporal: config.tick.temporal,
+        embedding_wait: config.embedding_wait(),
+        decision_deadline: config.decision_deadline(),
+        weights,
+        max_open_ticks: config.tick.max_open_ticks,
+    };
+    let mut recorder = match &record {
+        Some(path) => {
+            Some(Recorder::create(path, &RecordedConfig { engine: engine_config.clone(), model_set: m.name.clone() })?)
+        }
+        None => None,
+    };
+    let mut engine = Engine::new(engine_config, models.inference(config.tick.temporal)?);
 
     let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
     let alive_key = keys::alive(&fleet, &robot);
@@ -195,7 +202,20 @@ pub async fn run(
             _ = sleep_until(deadline) => Input::Poll,
         };
         let membership_change = matches!(input, Input::MemberJoined(_) | Input::MemberLeft(_));
-        let outputs = engine.handle(input, start.elapsed());
+        let now = start.elapsed();
+        if let Some(r) = recorder.as_mut() {
+            if let Err(e) = r.input(&input, now) {
+                tracing::error!("recording stopped: {e:#}");
+                recorder = None;
+            }
+        }
+        let outputs = engine.handle(input, now);
+        if let Some(r) = recorder.as_mut() {
+            if let Err(e) = outputs.iter().try_for_each(|o| r.output(o, now)) {
+                tracing::error!("recording stopped: {e:#}");
+                recorder = None;
+            }
+        }
         let mut decided = false;
         for o in outputs {
             let r = match &o {
@@ -225,6 +245,11 @@ pub async fn run(
     }
 
     tracing::info!(%robot, "leaving the fleet");
+    if let Some(r) = recorder {
+        if let Err(e) = r.finish() {
+            tracing::error!("finishing the recording: {e:#}");
+        }
+    }
     drop(subscribers);
     drop(membership);
     let _ = token.undeclare().await;

@@ -31,8 +31,8 @@ use spwi_proto::*;
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
-/// Timing and voting rules of a robot.
-#[derive(Debug, Clone)]
+/// Timing and voting rules of a robot (recorded with a run, so a replay uses the same).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EngineConfig {
     pub robot: RobotId,
     /// Random per process: tells our own echoes from another daemon with our id.

@@ -30,6 +30,7 @@ pub mod http;
 pub mod manifest;
 pub mod metrics;
 pub mod model;
+pub mod record;
 pub mod status;
 pub mod temporal;
 pub mod vote;

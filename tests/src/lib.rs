@@ -225,9 +225,20 @@ pub struct InProcessAgent {
 
 impl InProcessAgent {
     pub async fn start(hub: &Hub, robot: &RobotId, models: &Arc<ModelSet>, config: AgentConfig) -> InProcessAgent {
+        Self::start_recording(hub, robot, models, config, None).await
+    }
+
+    /// Starts an agent that records its engine's inputs and outputs to `record`.
+    pub async fn start_recording(
+        hub: &Hub,
+        robot: &RobotId,
+        models: &Arc<ModelSet>,
+        config: AgentConfig,
+        record: Option<PathBuf>,
+    ) -> InProcessAgent {
         let (tx, rx) = watch::channel(false);
         let (ready_tx, ready_rx) = tokio::sync::oneshot::channel();
-        let opts = Options { robot: robot.clone(), fleet: hub.fleet.clone(), config, zenoh: hub.peer_config() };
+        let opts = Options { robot: robot.clone(), fleet: hub.fleet.clone(), config, zenoh: hub.peer_config(), record };
         let task = tokio::spawn(daemon::run(opts, models.clone(), rx, Some(ready_tx)));
         let started = within!(10, format!("agent {robot} to start"), ready_rx).expect("agent failed to start");
         InProcessAgent { robot: robot.clone(), started, shutdown: tx, task }

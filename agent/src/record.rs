@@ -1,0 +1,185 @@
+//! Record and replay. `--record FILE` writes everything the engine saw and said to an
+//! MCAP file (the log format Foxglove Studio and ROS 2 tools open): each input with the
+//! engine time it was handled at, each output, and the engine's configuration. Replay
+//! feeds the recorded inputs, at their recorded times, to a fresh engine with the same
+//! models: the engine is deterministic, so it must say exactly what was recorded — a
+//! way to reproduce a field incident on a desk, bit for bit.
+//!
+//! Channels (message encoding `spwi-bincode-v1`: the `proto` codec's bytes):
+//!
+//! | topic | payload |
+//! |---|---|
+//! | `/spwi/config` | the engine configuration and model set name (JSON, once) |
+//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/vote`, `/spwi/in/decision` | a received message |
+//! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (JSON) |
+//! | `/spwi/in/poll` | empty: time passed |
+//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/decision` | a published message |
+//!
+//! Log and publish times are nanoseconds of engine time (since the daemon started).
+
+use crate::engine::{Engine, EngineConfig, Input, Output};
+use crate::model::ModelSet;
+use anyhow::{anyhow, bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use spwi_proto::{decode, encode, RobotId};
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+
+const BINCODE: &str = "spwi-bincode-v1";
+
+/// What `/spwi/config` holds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecordedConfig {
+    pub engine: EngineConfig,
+    pub model_set: String,
+}
+
+#[derive(Serialize, Deserialize)]
+struct MembershipRecord {
+    robot: RobotId,
+    alive: bool,
+}
+
+/// Writes a run to an MCAP file.
+pub struct Recorder {
+    writer: mcap::Writer<BufWriter<File>>,
+    channels: HashMap<&'static str, u16>,
+    sequence: u32,
+}
+
+const TOPICS: [(&str, &str); 10] = [
+    ("/spwi/config", "json"),
+    ("/spwi/in/detections", BINCODE),
+    ("/spwi/in/embedding", BINCODE),
+    ("/spwi/in/vote", BINCODE),
+    ("/spwi/in/decision", BINCODE),
+    ("/spwi/in/membership", "json"),
+    ("/spwi/in/poll", BINCODE),
+    ("/spwi/out/embedding", BINCODE),
+    ("/spwi/out/vote", BINCODE),
+    ("/spwi/out/decision", BINCODE),
+];
+
+impl Recorder {
+    pub fn create(path: &Path, config: &RecordedConfig) -> Result<Recorder> {
+        let file = File::create(path).with_context(|| format!("cannot create recording {}", path.display()))?;
+        let mut writer = mcap::WriteOptions::new()
+            .profile("spwi")
+            .chunk_size(Some(64 * 1024))
+            .create(BufWriter::new(file))
+            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        let mut channels = HashMap::new();
+        for (topic, encoding) in TOPICS {
+            let id = writer.add_channel(0, topic, encoding, &BTreeMap::new())?;
+            channels.insert(topic, id);
+        }
+        let mut r = Recorder { writer, channels, sequence: 0 };
+        r.write("/spwi/config", Duration::ZERO, &serde_json::to_vec(config)?)?;
+        Ok(r)
+    }
+
+    fn write(&mut self, topic: &'static str, now: Duration, data: &[u8]) -> Result<()> {
+        self.sequence += 1;
+        let t = now.as_nanos() as u64;
+        let header = mcap::records::MessageHeader {
+            channel_id: self.channels[topic],
+            sequence: self.sequence,
+            log_time: t,
+            publish_time: t,
+        };
+        self.writer.write_to_known_channel(&header, data)?;
+        Ok(())
+    }
+
+    pub fn input(&mut self, input: &Input, now: Duration) -> Result<()> {
+        match input {
+            Input::Frame(m) => self.write("/spwi/in/detections", now, &encode(m)),
+            Input::Embedding(m) => self.write("/spwi/in/embedding", now, &encode(m)),
+            Input::Vote(m) => self.write("/spwi/in/vote", now, &encode(m)),
+            Input::Decision(m) => self.write("/spwi/in/decision", now, &encode(m)),
+            Input::MemberJoined(r) | Input::MemberLeft(r) => {
+                let alive = matches!(input, Input::MemberJoined(_));
+                let json = serde_json::to_vec(&MembershipRecord { robot: r.clone(), alive })?;
+                self.write("/spwi/in/membership", now, &json)
+            }
+            Input::Poll => self.write("/spwi/in/poll", now, &[]),
+        }
+    }
+
+    pub fn output(&mut self, output: &Output, now: Duration) -> Result<()> {
+        match output {
+            Output::Embedding(m) => self.write("/spwi/out/embedding", now, &encode(m)),
+            Output::Vote(m) => self.write("/spwi/out/vote", now, &encode(m)),
+            Output::Decision(m) => self.write("/spwi/out/decision", now, &encode(m)),
+        }
+    }
+
+    /// Writes the summary and closes the file; a recording cut short (the process
+    /// killed) loses at most its last unfinished chunk.
+    pub fn finish(mut self) -> Result<()> {
+        self.writer.finish()?;
+        Ok(())
+    }
+}
+
+/// A recording read back.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    pub config: RecordedConfig,
+    pub inputs: Vec<(Duration, Input)>,
+    pub outputs: Vec<Output>,
+}
+
+/// Reads a recording; any record that does not decode is an error naming its topic
+/// and sequence number.
+pub fn read(path: &Path) -> Result<Recording> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read recording {}", path.display()))?;
+    let mut config = None;
+    let (mut inputs, mut outputs) = (Vec::new(), Vec::new());
+    for m in mcap::MessageStream::new(&bytes).map_err(|e| anyhow!("{}: not an MCAP file: {e}", path.display()))? {
+        let m = m.map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        let now = Duration::from_nanos(m.log_time);
+        let ctx = || format!("{}: record {} on {}", path.display(), m.sequence, m.channel.topic);
+        let d = &m.data[..];
+        match m.channel.topic.as_str() {
+            "/spwi/config" => config = Some(serde_json::from_slice(d).with_context(ctx)?),
+            "/spwi/in/detections" => inputs.push((now, Input::Frame(decode(d).with_context(ctx)?))),
+            "/spwi/in/embedding" => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
+            "/spwi/in/vote" => inputs.push((now, Input::Vote(decode(d).with_context(ctx)?))),
+            "/spwi/in/decision" => inputs.push((now, Input::Decision(decode(d).with_context(ctx)?))),
+            "/spwi/in/membership" => {
+                let r: MembershipRecord = serde_json::from_slice(d).with_context(ctx)?;
+                inputs.push((now, if r.alive { Input::MemberJoined(r.robot) } else { Input::MemberLeft(r.robot) }));
+            }
+            "/spwi/in/poll" => inputs.push((now, Input::Poll)),
+            "/spwi/out/embedding" => outputs.push(Output::Embedding(decode(d).with_context(ctx)?)),
+            "/spwi/out/vote" => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
+            "/spwi/out/decision" => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
+            other => bail!("{}: unknown topic {other:?} (not a spwi recording?)", path.display()),
+        }
+    }
+    let config = config.with_context(|| format!("{}: no /spwi/config record", path.display()))?;
+    Ok(Recording { config, inputs, outputs })
+}
+
+/// Runs the recorded inputs through a fresh engine and returns what it says.
+pub fn replay(recording: &Recording, models: &Arc<ModelSet>) -> Result<Vec<Output>> {
+    if models.manifest.name != recording.config.model_set {
+        bail!(
+            "the recording was made with model set {:?}, not {:?}: replay with the same models",
+            recording.config.model_set,
+            models.manifest.name
+        );
+    }
+    let cfg = recording.config.engine.clone();
+    let mut engine = Engine::new(cfg.clone(), models.inference(cfg.temporal)?);
+    let mut out = Vec::new();
+    for (now, input) in &recording.inputs {
+        out.extend(engine.handle(input.clone(), *now));
+    }
+    Ok(out)
+}
