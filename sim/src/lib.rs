@@ -1,1 +1,22 @@
+//! spwi-sim: a deterministic simulated factory that stands in for the paper's Isaac Sim.
+//!
+//! ```text
+//! layout.rs     the floor from a TOML file: stations and their objects, obstacles, robot slots
+//! worker.rs     the worker: plans round obstacles, avoids robots, works, changes its mind
+//! skeleton.rs   17 COCO keypoints of a walking body
+//! camera.rs     pinhole cameras and a flawed detector: boxes, occlusion, misses, noise
+//! appearance.rs synthetic 512-d features (class prototypes + view, distance, posture)
+//! world.rs      one tick of everything, deterministic from a seed; scenarios 1-3
+//! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
+//! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
+//! ```
 
+pub mod appearance;
+pub mod camera;
+pub mod geometry;
+pub mod layout;
+pub mod service;
+pub mod skeleton;
+pub mod stats;
+pub mod worker;
+pub mod world;

@@ -1,0 +1,129 @@
+//! `spwi-sim world`: the simulated world as a Zenoh service. It watches the fleet's
+//! liveliness tokens; each robot that joins takes the next free robot slot of the
+//! layout (its spawn pose and patrol), one that leaves frees it. Every tick (10 Hz) it
+//! publishes each live robot's detection frame, exactly as a detector node on that
+//! robot would, and the ground truth for scoring.
+
+use crate::layout::Layout;
+use crate::world::{Scenario, World};
+use anyhow::{anyhow, Result};
+use spwi_proto::keys::{self, Topic};
+use spwi_proto::*;
+use std::collections::BTreeMap;
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use zenoh::sample::SampleKind;
+
+pub struct WorldOptions {
+    pub fleet: FleetId,
+    pub scenario: Scenario,
+    pub seed: u64,
+    pub layout: Layout,
+    pub zenoh: zenoh::Config,
+    pub tick: Duration,
+}
+
+/// Robot id → layout slot, giving each newcomer the lowest free slot.
+#[derive(Debug, Default)]
+pub struct Slots {
+    taken: BTreeMap<RobotId, usize>,
+    capacity: usize,
+}
+
+impl Slots {
+    pub fn new(capacity: usize) -> Self {
+        Slots { taken: BTreeMap::new(), capacity }
+    }
+
+    /// The slot of a robot that joined, or `None` when the layout has no room left.
+    pub fn join(&mut self, robot: RobotId) -> Option<usize> {
+        if let Some(&s) = self.taken.get(&robot) {
+            return Some(s);
+        }
+        let free = (0..self.capacity).find(|s| !self.taken.values().any(|t| t == s))?;
+        self.taken.insert(robot, free);
+        Some(free)
+    }
+
+    pub fn leave(&mut self, robot: &RobotId) -> Option<usize> {
+        self.taken.remove(robot)
+    }
+
+    /// (slot, robot) sorted by slot.
+    pub fn assigned(&self) -> Vec<(usize, RobotId)> {
+        let mut v: Vec<_> = self.taken.iter().map(|(r, &s)| (s, r.clone())).collect();
+        v.sort();
+        v
+    }
+}
+
+pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Result<()> {
+    let session = zenoh::open(opts.zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    let fleet = opts.fleet.clone();
+    let _membership = session
+        .liveliness()
+        .declare_subscriber(keys::all_alive(&fleet))
+        .history(true)
+        .callback(move |s| {
+            if let Some(r) = keys::parse_alive(&fleet, s.key_expr().as_str()) {
+                let _ = tx.send((r, s.kind() == SampleKind::Put));
+            }
+        })
+        .await
+        .map_err(|e| anyhow!(e))?;
+    let mut world = World::new(opts.layout, opts.scenario, opts.seed, 0);
+    let mut slots = Slots::new(world.robots.len());
+    let truth_key = keys::truth(&opts.fleet);
+    let mut interval = tokio::time::interval(opts.tick);
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    tracing::info!(fleet = %opts.fleet, scenario = opts.scenario as u8, seed = opts.seed, "world running");
+    loop {
+        tokio::select! {
+            _ = shutdown.changed() => break,
+            Some((robot, alive)) = rx.recv() => {
+                if alive {
+                    match slots.join(robot.clone()) {
+                        Some(s) => { world.robots[s].present = true; tracing::info!(%robot, slot = s, "robot joined"); }
+                        None => tracing::warn!(%robot, "no free robot slot in the layout: this robot gets no frames"),
+                    }
+                } else if let Some(s) = slots.leave(&robot) {
+                    world.robots[s].present = false;
+                    tracing::info!(%robot, slot = s, "robot left");
+                }
+            }
+            _ = interval.tick() => {
+                world.step();
+                let assigned = slots.assigned();
+                for (slot, robot) in &assigned {
+                    let frame = world.observe(*slot, robot);
+                    let key = keys::robot_topic(&opts.fleet, robot, Topic::Detections);
+                    if let Err(e) = session.put(&key, encode(&frame)).await {
+                        tracing::warn!("publishing {key}: {e}");
+                    }
+                }
+                let _ = session.put(&truth_key, encode(&world.truth(&assigned))).await;
+            }
+        }
+    }
+    let _ = session.close().await;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn newcomers_take_the_lowest_free_slot_and_leavers_free_theirs() {
+        let mut s = Slots::new(2);
+        let (a, b, c) = (RobotId::new("a").unwrap(), RobotId::new("b").unwrap(), RobotId::new("c").unwrap());
+        assert_eq!(s.join(a.clone()), Some(0));
+        assert_eq!(s.join(b.clone()), Some(1));
+        assert_eq!(s.join(c.clone()), None, "layout full");
+        assert_eq!(s.join(a.clone()), Some(0), "joining twice keeps the slot");
+        assert_eq!(s.leave(&a), Some(0));
+        assert_eq!(s.join(c.clone()), Some(0));
+        assert_eq!(s.assigned(), vec![(0, c), (1, b)]);
+    }
+}

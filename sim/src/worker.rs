@@ -1,0 +1,272 @@
+//! The worker: walks to a goal station around obstacles and moving robots, works there
+//! for a while, picks another goal, and sometimes changes its mind on the way.
+//!
+//! Motion is a global plan plus reactive avoidance, as a person walks: the shortest
+//! path over the corners of the obstacles (inflated by the worker's clearance) gives
+//! the next waypoint; a social-force term pushes away from nearby robots and
+//! obstacles; a step that would enter an obstacle is refused, so the worker never walks
+//! through one. Ground-truth intent is the goal station at every tick.
+
+use crate::geometry::*;
+use crate::layout::{Layout, WORKER_CLEARANCE};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use spwi_proto::{WorkerPhase, NUM_CLASSES};
+
+/// Preferred walking speed, m/s.
+pub const SPEED: f32 = 1.2;
+/// Within this distance of its work spot the worker has arrived.
+pub const ARRIVED: f32 = 0.25;
+/// How long a change of goal counts as a transition, s.
+const TRANSITION_S: f32 = 2.0;
+
+#[derive(Debug, Clone)]
+pub struct Worker {
+    pub position: P2,
+    pub heading: f32,
+    pub velocity: P2,
+    pub goal: u8,
+    pub phase: WorkerPhase,
+    /// Seconds left to work at the station (Stationary) or in the transition.
+    timer: f32,
+    /// Whether this trip may still change its goal, and at what remaining distance.
+    change_at: Option<f32>,
+    /// Gait phase of the walking skeleton, radians.
+    pub gait: f32,
+    /// Goal changes made so far (mid-way ones).
+    pub goal_changes: u32,
+    /// Trips finished at their labelled station.
+    pub arrivals: u32,
+}
+
+/// Obstacles the worker plans around, inflated by its clearance.
+fn inflated(layout: &Layout, with_obstacles: bool) -> Vec<Rect> {
+    if !with_obstacles {
+        return Vec::new();
+    }
+    layout.obstacles.iter().map(|o| o.rect().inflate(WORKER_CLEARANCE)).collect()
+}
+
+fn visible(a: P2, b: P2, rects: &[Rect]) -> bool {
+    !rects.iter().any(|r| r.blocks(a, b))
+}
+
+/// The first waypoint of the shortest obstacle-free path from `from` to `to`
+/// (visibility graph over the inflated obstacles' corners, pushed out a little).
+pub fn next_waypoint(from: P2, to: P2, rects: &[Rect]) -> P2 {
+    if visible(from, to, rects) {
+        return to;
+    }
+    let mut nodes = vec![from, to];
+    for r in rects {
+        for c in r.inflate(0.05).corners() {
+            if !rects.iter().any(|o| o.contains(c)) {
+                nodes.push(c);
+            }
+        }
+    }
+    let n = nodes.len();
+    let mut best = vec![f32::INFINITY; n];
+    let mut prev = vec![usize::MAX; n];
+    let mut done = vec![false; n];
+    best[0] = 0.0;
+    for _ in 0..n {
+        let Some(u) = (0..n).filter(|&i| !done[i] && best[i].is_finite()).min_by(|&a, &b| best[a].total_cmp(&best[b]))
+        else {
+            break;
+        };
+        done[u] = true;
+        if u == 1 {
+            break;
+        }
+        for v in 0..n {
+            if !done[v] && visible(nodes[u], nodes[v], rects) {
+                let d = best[u] + dist(nodes[u], nodes[v]);
+                if d < best[v] {
+                    best[v] = d;
+                    prev[v] = u;
+                }
+            }
+        }
+    }
+    if prev[1] == usize::MAX {
+        return to; // unreachable: walk straight and let the reactive layer cope
+    }
+    let mut v = 1;
+    while prev[v] != 0 {
+        v = prev[v];
+    }
+    nodes[v]
+}
+
+impl Worker {
+    /// A worker at a random free position, heading to a random station.
+    pub fn spawn(layout: &Layout, with_obstacles: bool, rng: &mut ChaCha8Rng) -> Worker {
+        let [w, h] = layout.floor.size;
+        let rects = inflated(layout, with_obstacles);
+        let position = loop {
+            let p = [rng.gen_range(0.5..w - 0.5), rng.gen_range(0.5..h - 0.5)];
+            if !rects.iter().any(|r| r.contains(p)) {
+                break p;
+            }
+        };
+        let mut worker = Worker {
+            position,
+            heading: rng.gen_range(-std::f32::consts::PI..std::f32::consts::PI),
+            velocity: [0.0, 0.0],
+            goal: 0,
+            phase: WorkerPhase::Moving,
+            timer: 0.0,
+            change_at: None,
+            gait: 0.0,
+            goal_changes: 0,
+            arrivals: 0,
+        };
+        worker.new_trip(layout, rng, None);
+        worker
+    }
+
+    fn new_trip(&mut self, layout: &Layout, rng: &mut ChaCha8Rng, not: Option<u8>) {
+        self.goal = loop {
+            let g = rng.gen_range(0..NUM_CLASSES as u8);
+            if Some(g) != not {
+                break g;
+            }
+        };
+        let d = dist(self.position, layout.station(self.goal).work_spot);
+        // One trip in four changes its goal somewhere along the way.
+        self.change_at = (rng.gen::<f32>() < 0.25 && d > 4.0).then(|| rng.gen_range(1.5..d * 0.7));
+    }
+
+    /// Advances the worker by `dt` seconds among `robots` (positions, radius 0.35 m).
+    pub fn step(&mut self, dt: f32, layout: &Layout, with_obstacles: bool, robots: &[P2], rng: &mut ChaCha8Rng) {
+        let rects = inflated(layout, with_obstacles);
+        let spot = layout.station(self.goal).work_spot;
+        match self.phase {
+            WorkerPhase::Stationary => {
+                self.velocity = [0.0, 0.0];
+                self.timer -= dt;
+                if self.timer <= 0.0 {
+                    let here = self.goal;
+                    self.new_trip(layout, rng, Some(here));
+                    self.phase = WorkerPhase::Moving;
+                }
+                return;
+            }
+            WorkerPhase::Transition => {
+                self.timer -= dt;
+                if self.timer <= 0.0 {
+                    self.phase = WorkerPhase::Moving;
+                }
+            }
+            WorkerPhase::Moving => {}
+        }
+        let remaining = dist(self.position, spot);
+        if remaining < ARRIVED {
+            self.phase = WorkerPhase::Stationary;
+            self.timer = rng.gen_range(2.0..6.0);
+            self.arrivals += 1;
+            self.velocity = [0.0, 0.0];
+            return;
+        }
+        if self.change_at.is_some_and(|at| remaining < at) {
+            self.change_at = None;
+            let old = self.goal;
+            self.new_trip(layout, rng, Some(old));
+            self.change_at = None;
+            self.goal_changes += 1;
+            self.phase = WorkerPhase::Transition;
+            self.timer = TRANSITION_S;
+        }
+        let spot = layout.station(self.goal).work_spot;
+        let waypoint = next_waypoint(self.position, spot, &rects);
+        let mut desired = scale(unit(sub(waypoint, self.position)), SPEED.min(dist(self.position, spot) / dt));
+        // Social force: robots within 1.5 m and obstacle faces within 0.6 m push away.
+        for &r in robots {
+            let away = sub(self.position, r);
+            let d = norm(away);
+            if d < 1.5 && d > 1e-3 {
+                desired = add(desired, scale(unit(away), 1.2 * (1.5 - d) / 1.5));
+            }
+        }
+        for r in &rects {
+            let away = sub(self.position, r.closest(self.position));
+            let d = norm(away);
+            if d < 0.6 && d > 1e-3 {
+                desired = add(desired, scale(unit(away), 0.5 * (0.6 - d) / 0.6));
+            }
+        }
+        // Smooth velocity changes (a person does not turn on the spot).
+        self.velocity = add(scale(self.velocity, 0.6), scale(desired, 0.4));
+        let speed = norm(self.velocity);
+        if speed > SPEED {
+            self.velocity = scale(self.velocity, SPEED / speed);
+        }
+        let next = add(self.position, scale(self.velocity, dt));
+        let [w, h] = layout.floor.size;
+        let inside = |p: P2| p[0] > 0.2 && p[0] < w - 0.2 && p[1] > 0.2 && p[1] < h - 0.2;
+        let walls: Vec<Rect> = layout.obstacles.iter().map(|o| o.rect().inflate(0.1)).collect();
+        let free = |p: P2| inside(p) && (!with_obstacles || !walls.iter().any(|r| r.contains(p)));
+        if free(next) {
+            self.position = next;
+        } else {
+            // slide along whichever axis is free, else stay
+            let sx = [next[0], self.position[1]];
+            let sy = [self.position[0], next[1]];
+            if free(sx) {
+                self.position = sx;
+            } else if free(sy) {
+                self.position = sy;
+            }
+        }
+        if norm(self.velocity) > 0.05 {
+            self.heading = self.velocity[1].atan2(self.velocity[0]);
+            self.gait += norm(self.velocity) * dt * 2.0 * std::f32::consts::PI / 1.3;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn plans_around_an_obstacle() {
+        let r = [Rect { min: [4.0, -5.0], max: [6.0, 5.0] }];
+        let w = next_waypoint([0.0, 0.0], [10.0, 0.0], &r);
+        assert!(w != [10.0, 0.0] && (w[1].abs() > 4.9), "waypoint {w:?} must go round the wall");
+        assert_eq!(next_waypoint([0.0, 6.0], [10.0, 6.0], &r), [10.0, 6.0]);
+    }
+
+    #[test]
+    fn never_walks_through_an_obstacle_and_arrives_where_labelled() {
+        let layout = Layout::default_layout();
+        let walls: Vec<Rect> = layout.obstacles.iter().map(|o| o.rect()).collect();
+        for seed in 0..12 {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let mut w = Worker::spawn(&layout, true, &mut rng);
+            let mut label_before_stop = w.goal;
+            let mut was_stationary = false;
+            for _ in 0..3000 {
+                let prev = w.position;
+                w.step(0.1, &layout, true, &[[10.0, 0.8]], &mut rng);
+                assert!(
+                    !walls.iter().any(|r| r.contains(w.position)),
+                    "seed {seed}: inside an obstacle at {:?}",
+                    w.position
+                );
+                assert!(!walls.iter().any(|r| r.blocks(prev, w.position)), "seed {seed}: stepped through an obstacle");
+                let stationary = w.phase == WorkerPhase::Stationary;
+                if stationary && !was_stationary {
+                    // every labelled trip ends at its labelled station
+                    assert_eq!(w.goal, label_before_stop);
+                    assert!(dist(w.position, layout.station(w.goal).work_spot) < ARRIVED + 1e-3);
+                }
+                was_stationary = stationary;
+                label_before_stop = w.goal;
+            }
+            assert!(w.arrivals >= 3, "seed {seed}: only {} arrivals in 300 s", w.arrivals);
+        }
+    }
+}
