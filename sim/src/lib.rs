@@ -9,10 +9,12 @@
 //! world.rs      one tick of everything, deterministic from a seed; scenarios 1-3
 //! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
+//! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! ```
 
 pub mod appearance;
 pub mod camera;
+pub mod demo;
 pub mod geometry;
 pub mod layout;
 pub mod service;

@@ -42,6 +42,36 @@ enum Command {
         #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
         tick_ms: u64,
     },
+    /// Watch a fleet decide: the world and N agents in this process, a live view each
+    /// second, a summary at the end (or on Ctrl-C).
+    Demo {
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=8))]
+        robots: u64,
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// How long to run (e.g. 60s, 2m).
+        #[arg(long, default_value = "60s", value_parser = spwi_sim::demo::parse_duration)]
+        duration: Duration,
+        /// Stop one agent after this long, to watch the fleet shrink.
+        #[arg(long, value_parser = spwi_sim::demo::parse_duration)]
+        kill_after: Option<Duration>,
+        /// Start one more agent after this long, to watch it join.
+        #[arg(long, value_parser = spwi_sim::demo::parse_duration)]
+        join_after: Option<Duration>,
+        /// Model set folder (default: the agent's default).
+        #[arg(long)]
+        models: Option<PathBuf>,
+        #[arg(long)]
+        layout: Option<PathBuf>,
+        /// Write the summary as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// No live view, only the summary.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Measure how hard a scenario is (who sees the worker, detections, phases, goal changes).
     Stats {
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
@@ -88,6 +118,37 @@ fn run(args: Args) -> Result<()> {
                 spawn_signal_handler(tx);
                 spwi_sim::service::run(opts, rx).await
             })
+        }
+        Command::Demo { robots, scenario, seed, duration, kill_after, join_after, models, layout: l, json, quiet } => {
+            init_tracing(LogFormat::Human);
+            let mut agent = spwi_agent::config::AgentConfig::load(None)?;
+            if let Some(m) = models {
+                agent.models.dir = m;
+            }
+            let set = spwi_agent::daemon::load_models(&agent)?;
+            let opts = spwi_sim::demo::DemoOptions {
+                robots: robots as usize,
+                scenario: Scenario::from_number(scenario)?,
+                seed,
+                duration,
+                kill_after,
+                join_after,
+                layout: layout(l)?,
+                agent,
+                view: !quiet,
+            };
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            let summary = rt.block_on(async {
+                let (tx, rx) = tokio::sync::watch::channel(false);
+                spawn_signal_handler(tx);
+                spwi_sim::demo::run(opts, set, rx).await
+            })?;
+            println!("\n{}", serde_json::to_string_pretty(&summary)?);
+            if let Some(path) = json {
+                std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+                    .map_err(|e| anyhow::anyhow!("--json {}: {e}", path.display()))?;
+            }
+            Ok(())
         }
         Command::Stats { scenario, robots, episodes, ticks, seed, layout: l, json } => {
             let l = layout(l)?;

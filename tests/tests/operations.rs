@@ -49,7 +49,12 @@ async fn status_metrics_and_health_are_served_while_deciding() {
 
         let (code, body) = tokio::task::spawn_blocking(move || get(addr, "/metrics")).await.unwrap();
         assert_eq!(code, 200);
-        for needle in ["spwi_decisions_total{robot=\"h0\"}", "spwi_members{robot=\"h0\"} 2", "stage=\"gcn\"", "stage=\"frame_to_decision\""] {
+        for needle in [
+            "spwi_decisions_total{robot=\"h0\"}",
+            "spwi_members{robot=\"h0\"} 2",
+            "stage=\"gcn\"",
+            "stage=\"frame_to_decision\"",
+        ] {
             assert!(body.contains(needle), "/metrics lacks {needle}:\n{body}");
         }
         let (code, _) = tokio::task::spawn_blocking(move || get(addr, "/nope")).await.unwrap();

@@ -1,0 +1,309 @@
+//! `spwi-sim demo`: the simulated world and N real agents (the `spwi-agent` daemon
+//! code, each with its own Zenoh session) in one process, peers on loopback, plus an
+//! observer that shows, once a second, what the fleet decides against the truth, and
+//! sums it up at the end. `--kill-after` / `--join-after` remove and add an agent
+//! while it runs, so membership changes can be watched.
+
+use crate::layout::Layout;
+use crate::service::{self, WorldOptions};
+use crate::world::Scenario;
+use anyhow::{anyhow, Context, Result};
+use serde::Serialize;
+use spwi_agent::config::AgentConfig;
+use spwi_agent::daemon::{self, Options};
+use spwi_agent::model::ModelSet;
+use spwi_agent::zenoh_config;
+use spwi_proto::keys::{self, Topic};
+use spwi_proto::*;
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::watch;
+
+pub struct DemoOptions {
+    pub robots: usize,
+    pub scenario: Scenario,
+    pub seed: u64,
+    pub duration: Duration,
+    pub kill_after: Option<Duration>,
+    pub join_after: Option<Duration>,
+    pub layout: Layout,
+    pub agent: AgentConfig,
+    /// Print the live view once a second.
+    pub view: bool,
+}
+
+/// The summary printed at the end and written by `--json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub robots: usize,
+    pub ticks: u64,
+    pub decisions: BTreeMap<String, u64>,
+    /// Share of ticks on which every robot that decided chose the same class.
+    pub agreement: f64,
+    pub accuracy: Accuracy,
+    pub latency_ms: Latency,
+    pub members_changes: Vec<MembersChange>,
+    pub messages_per_tick: f64,
+    pub bytes_per_tick: f64,
+    /// True when the models are the random-weight fixtures: accuracy is then chance.
+    pub fixture_models: bool,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Accuracy {
+    /// Team decision at t against the true intent at t.
+    pub t: f64,
+    /// Team forecast for t+h against the true intent at t+h, mean over h = 1..H.
+    pub future: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Latency {
+    /// From the world publishing a tick to a robot publishing its decision for it.
+    pub p50: f64,
+    pub p99: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct MembersChange {
+    pub at_s: f64,
+    pub event: String,
+    pub robot: String,
+}
+
+#[derive(Default)]
+struct Observed {
+    truth: BTreeMap<u64, (u8, Instant)>,
+    decisions: BTreeMap<u64, BTreeMap<RobotId, (DecisionMsg, Instant)>>,
+    votes: BTreeMap<RobotId, VoteMsg>,
+    messages: u64,
+    bytes: u64,
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)]
+}
+
+fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bool) -> Summary {
+    let mut decisions: BTreeMap<String, u64> = BTreeMap::new();
+    let (mut agree, mut compared, mut correct, mut judged, mut fut_ok, mut fut_n) =
+        (0u64, 0u64, 0u64, 0u64, 0u64, 0u64);
+    let mut latencies = Vec::new();
+    for (tick, by) in &o.decisions {
+        for (r, (_, at)) in by {
+            *decisions.entry(r.to_string()).or_default() += 1;
+            if let Some((_, t0)) = o.truth.get(tick) {
+                latencies.push(at.saturating_duration_since(*t0).as_secs_f64() * 1e3);
+            }
+        }
+        let classes: Vec<Option<u8>> = by.values().map(|(d, _)| d.steps.first().map(|s| s.class)).collect();
+        compared += 1;
+        agree += u64::from(classes.windows(2).all(|w| w[0] == w[1]));
+        // the team's answer: the first robot's decision (they agree on nearly every tick)
+        let Some((d, _)) = by.values().next() else { continue };
+        if let (Some(step), Some((truth, _))) = (d.steps.first(), o.truth.get(tick)) {
+            judged += 1;
+            correct += u64::from(step.class == *truth);
+        }
+        for (h, s) in d.steps.iter().enumerate().skip(1) {
+            if let Some((truth, _)) = o.truth.get(&(tick + h as u64)) {
+                fut_n += 1;
+                fut_ok += u64::from(s.class == *truth);
+            }
+        }
+    }
+    latencies.sort_by(f64::total_cmp);
+    let ticks = o.truth.len().max(1) as f64;
+    let ratio = |a: u64, b: u64| if b == 0 { 0.0 } else { a as f64 / b as f64 };
+    Summary {
+        robots,
+        ticks: o.truth.len() as u64,
+        decisions,
+        agreement: ratio(agree, compared),
+        accuracy: Accuracy { t: ratio(correct, judged), future: ratio(fut_ok, fut_n) },
+        latency_ms: Latency { p50: percentile(&latencies, 0.5), p99: percentile(&latencies, 0.99) },
+        members_changes: changes.to_vec(),
+        messages_per_tick: o.messages as f64 / ticks,
+        bytes_per_tick: o.bytes as f64 / ticks,
+        fixture_models: fixture,
+    }
+}
+
+fn view(o: &Observed, elapsed: Duration, members: &[RobotId]) {
+    let Some((&tick, &(truth, _))) = o.truth.iter().next_back() else { return };
+    let name = |c: u8| STATION_NAMES.get(c as usize).copied().unwrap_or("?");
+    println!("── t = {:>5.1} s  tick {tick}  members {}", elapsed.as_secs_f64(), members.len());
+    for r in members {
+        match o.votes.get(r) {
+            Some(v) => println!(
+                "   {r:<10} votes {:<14} conf {:.2}  sees {}",
+                name(v.steps[0].class),
+                v.steps[0].confidence,
+                v.visibility
+            ),
+            None => println!("   {r:<10} (no vote yet)"),
+        }
+    }
+    let decided = o.decisions.iter().rev().find_map(|(t, by)| by.values().next().map(|(d, _)| (*t, d.clone())));
+    if let Some((t, d)) = decided {
+        let forecast: Vec<&str> = d.steps.iter().skip(1).step_by(5).map(|s| name(s.class)).collect();
+        let now = d.steps.first().map_or("(nobody sees the worker)", |s| name(s.class));
+        println!("   team decision (tick {t}): {now}   forecast every 0.5 s: {}", forecast.join(" → "));
+    }
+    println!("   truth: heading to {}", name(truth));
+}
+
+/// Runs the demo and returns its summary.
+pub async fn run(opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::Receiver<bool>) -> Result<Summary> {
+    let fleet = FleetId::new("demo")?;
+    let observer = zenoh::open(zenoh_config::loopback_peer(&[])?).await.map_err(|e| anyhow!(e))?;
+    let locator = observer.info().locators().await.into_iter().next().context("observer listens nowhere")?.to_string();
+    let peer = || zenoh_config::loopback_peer(std::slice::from_ref(&locator));
+    let observed = Arc::new(Mutex::new(Observed::default()));
+    let o = observed.clone();
+    let f = fleet.clone();
+    let _all = observer
+        .declare_subscriber(format!("spwi/{fleet}/**"))
+        .callback(move |s| {
+            let key = s.key_expr().as_str().to_owned();
+            let bytes = s.payload().to_bytes();
+            let mut o = o.lock().expect("observer lock");
+            o.messages += 1;
+            o.bytes += bytes.len() as u64;
+            if key == keys::truth(&f) {
+                if let Ok(t) = decode::<TruthMsg>(&bytes) {
+                    o.truth.insert(t.tick, (t.intent, Instant::now()));
+                }
+            } else if let Some((robot, topic)) = keys::parse_robot_topic(&f, &key) {
+                match topic {
+                    Topic::Decision => {
+                        if let Ok(d) = decode_from::<DecisionMsg>(&bytes, &robot) {
+                            o.decisions.entry(d.tick).or_default().insert(robot, (d, Instant::now()));
+                        }
+                    }
+                    Topic::Vote => {
+                        if let Ok(v) = decode_from::<VoteMsg>(&bytes, &robot) {
+                            o.votes.insert(robot, v);
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        })
+        .await
+        .map_err(|e| anyhow!(e))?;
+
+    let start_agent = |i: usize| -> Result<(RobotId, watch::Sender<bool>, tokio::task::JoinHandle<Result<()>>)> {
+        let robot = RobotId::new(format!("robot{i}"))?;
+        let (tx, rx) = watch::channel(false);
+        let options = Options {
+            robot: robot.clone(),
+            fleet: fleet.clone(),
+            config: opts.agent.clone(),
+            zenoh: peer()?,
+            record: None,
+        };
+        Ok((robot, tx, tokio::spawn(daemon::run(options, models.clone(), rx, None))))
+    };
+    let mut agents = Vec::new();
+    for i in 0..opts.robots {
+        agents.push(start_agent(i)?);
+    }
+    let (world_stop, world_rx) = watch::channel(false);
+    let world = tokio::spawn(service::run(
+        WorldOptions {
+            fleet: fleet.clone(),
+            scenario: opts.scenario,
+            seed: opts.seed,
+            layout: opts.layout.clone(),
+            zenoh: peer()?,
+            tick: Duration::from_millis(100),
+        },
+        world_rx,
+    ));
+
+    let started = Instant::now();
+    let mut changes = Vec::new();
+    let (mut killed, mut joined) = (false, false);
+    let mut next_id = opts.robots;
+    let mut second = tokio::time::interval(Duration::from_secs(1));
+    second.tick().await;
+    while started.elapsed() < opts.duration {
+        tokio::select! {
+            _ = stop.changed() => break,
+            _ = second.tick() => {}
+        }
+        let elapsed = started.elapsed();
+        if opts.kill_after.is_some_and(|k| elapsed >= k) && !killed && agents.len() > 1 {
+            killed = true;
+            let (robot, tx, task) = agents.pop().expect("an agent");
+            let _ = tx.send(true);
+            let _ = task.await;
+            changes.push(MembersChange { at_s: elapsed.as_secs_f64(), event: "left".into(), robot: robot.to_string() });
+        }
+        if opts.join_after.is_some_and(|j| elapsed >= j) && !joined {
+            joined = true;
+            let a = start_agent(next_id)?;
+            next_id += 1;
+            changes.push(MembersChange { at_s: elapsed.as_secs_f64(), event: "joined".into(), robot: a.0.to_string() });
+            agents.push(a);
+        }
+        if opts.view {
+            let members: Vec<RobotId> = agents.iter().map(|a| a.0.clone()).collect();
+            view(&observed.lock().expect("observer lock"), elapsed, &members);
+        }
+    }
+
+    let _ = world_stop.send(true);
+    let _ = world.await;
+    for (_, tx, task) in agents {
+        let _ = tx.send(true);
+        let _ = task.await;
+    }
+    let _ = observer.close().await;
+    let o = observed.lock().expect("observer lock");
+    Ok(summarise(&o, opts.robots, &changes, models.manifest.fixture))
+}
+
+/// Parses durations like `60s`, `2m`, `500ms` or a bare number of seconds.
+pub fn parse_duration(s: &str) -> Result<Duration, String> {
+    let (num, unit) = s.find(|c: char| c.is_ascii_alphabetic()).map_or((s, "s"), |i| s.split_at(i));
+    let v: f64 = num.trim().parse().map_err(|_| format!("{s:?} is not a duration (e.g. 60s, 2m, 500ms)"))?;
+    let secs = match unit {
+        "ms" => v / 1000.0,
+        "s" => v,
+        "m" => v * 60.0,
+        _ => return Err(format!("{s:?}: unknown unit {unit:?} (ms, s, m)")),
+    };
+    if !(secs.is_finite() && secs >= 0.0 && secs <= 86_400.0) {
+        return Err(format!("{s:?}: must be within 0 s and 24 h"));
+    }
+    Ok(Duration::from_secs_f64(secs))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn durations() {
+        assert_eq!(parse_duration("60s"), Ok(Duration::from_secs(60)));
+        assert_eq!(parse_duration("2m"), Ok(Duration::from_secs(120)));
+        assert_eq!(parse_duration("500ms"), Ok(Duration::from_millis(500)));
+        assert_eq!(parse_duration("3"), Ok(Duration::from_secs(3)));
+        assert!(parse_duration("soon").is_err());
+        assert!(parse_duration("5h").is_err());
+    }
+
+    #[test]
+    fn percentiles() {
+        let v: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(percentile(&v, 0.5), 51.0);
+        assert_eq!(percentile(&v, 0.99), 99.0);
+        assert_eq!(percentile(&[], 0.5), 0.0);
+    }
+}
