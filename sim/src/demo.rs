@@ -279,7 +279,7 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
         "m" => v * 60.0,
         _ => return Err(format!("{s:?}: unknown unit {unit:?} (ms, s, m)")),
     };
-    if !(secs.is_finite() && secs >= 0.0 && secs <= 86_400.0) {
+    if !(secs.is_finite() && (0.0..=86_400.0).contains(&secs)) {
         return Err(format!("{s:?}: must be within 0 s and 24 h"));
     }
     Ok(Duration::from_secs_f64(secs))
