@@ -31,6 +31,10 @@ pub struct DemoOptions {
     pub agent: AgentConfig,
     /// Print the live view once a second.
     pub view: bool,
+    /// Serve the live page on this address.
+    pub http: Option<std::net::SocketAddr>,
+    /// Told the page's bound address once it is served.
+    pub on_http: Option<tokio::sync::oneshot::Sender<std::net::SocketAddr>>,
 }
 
 /// The summary printed at the end and written by `--json`.
@@ -77,8 +81,83 @@ struct Observed {
     truth: BTreeMap<u64, (u8, Instant)>,
     decisions: BTreeMap<u64, BTreeMap<RobotId, (DecisionMsg, Instant)>>,
     votes: BTreeMap<RobotId, VoteMsg>,
+    last_truth: Option<TruthMsg>,
+    trail: std::collections::VecDeque<[f32; 2]>,
     messages: u64,
     bytes: u64,
+}
+
+/// What the live page shows, sent to it as JSON a few times a second.
+#[derive(Serialize)]
+struct PageState {
+    tick: u64,
+    scenario: u8,
+    fixture_models: bool,
+    worker: [f32; 2],
+    trail: Vec<[f32; 2]>,
+    truth: u8,
+    robots: Vec<PageRobot>,
+    decision: Option<Vec<u8>>,
+    accuracy: f64,
+    agreement: f64,
+    series: Vec<SeriesPoint>,
+}
+
+#[derive(Serialize)]
+struct PageRobot {
+    robot: RobotId,
+    position: [f32; 2],
+    heading: f32,
+    vote: Option<PageVote>,
+}
+
+#[derive(Serialize)]
+struct PageVote {
+    class: u8,
+    confidence: f32,
+    visibility: u32,
+}
+
+#[derive(Serialize, Clone)]
+struct SeriesPoint {
+    accuracy: f64,
+    agreement: f64,
+}
+
+fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoint]) -> Option<PageState> {
+    let t = o.last_truth.as_ref()?;
+    let decision = o
+        .decisions
+        .iter()
+        .next_back()
+        .and_then(|(_, by)| by.values().next())
+        .map(|(d, _)| d.steps.iter().map(|s| s.class).collect());
+    Some(PageState {
+        tick: t.tick,
+        scenario,
+        fixture_models: summary.fixture_models,
+        worker: t.worker_position,
+        trail: o.trail.iter().copied().collect(),
+        truth: t.intent,
+        robots: t
+            .robots
+            .iter()
+            .map(|r| PageRobot {
+                robot: r.robot.clone(),
+                position: r.position,
+                heading: r.heading,
+                vote: o.votes.get(&r.robot).filter(|v| v.tick + 10 >= t.tick).map(|v| PageVote {
+                    class: v.steps[0].class,
+                    confidence: v.steps[0].confidence,
+                    visibility: v.visibility,
+                }),
+            })
+            .collect(),
+        decision,
+        accuracy: summary.accuracy.t,
+        agreement: summary.agreement,
+        series: series.to_vec(),
+    })
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -158,8 +237,20 @@ fn view(o: &Observed, elapsed: Duration, members: &[RobotId]) {
 }
 
 /// Runs the demo and returns its summary.
-pub async fn run(opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::Receiver<bool>) -> Result<Summary> {
+pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::Receiver<bool>) -> Result<Summary> {
     let fleet = FleetId::new("demo")?;
+    let (web_stop, web_rx) = watch::channel(false);
+    let mut web = None;
+    if let Some(addr) = opts.http {
+        let w = crate::demo_web::Web::new(serde_json::to_string(&opts.layout)?);
+        let (bound, serving) = crate::demo_web::serve(addr, w.clone(), web_rx).await?;
+        tokio::spawn(serving);
+        println!("live view: http://{bound}/");
+        if let Some(tx) = opts.on_http.take() {
+            let _ = tx.send(bound);
+        }
+        web = Some(w);
+    }
     let observer = zenoh::open(zenoh_config::loopback_peer(&[])?).await.map_err(|e| anyhow!(e))?;
     let locator = observer.info().locators().await.into_iter().next().context("observer listens nowhere")?.to_string();
     let peer = || zenoh_config::loopback_peer(std::slice::from_ref(&locator));
@@ -177,6 +268,11 @@ pub async fn run(opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::Rece
             if key == keys::truth(&f) {
                 if let Ok(t) = decode::<TruthMsg>(&bytes) {
                     o.truth.insert(t.tick, (t.intent, Instant::now()));
+                    o.trail.push_back(t.worker_position);
+                    if o.trail.len() > 100 {
+                        o.trail.pop_front();
+                    }
+                    o.last_truth = Some(t);
                 }
             } else if let Some((robot, topic)) = keys::parse_robot_topic(&f, &key) {
                 match topic {
@@ -230,13 +326,17 @@ pub async fn run(opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::Rece
     let mut changes = Vec::new();
     let (mut killed, mut joined) = (false, false);
     let mut next_id = opts.robots;
-    let mut second = tokio::time::interval(Duration::from_secs(1));
-    second.tick().await;
+    // Five beats a second: the page moves smoothly, the terminal view prints every fifth.
+    let mut beat = tokio::time::interval(Duration::from_millis(200));
+    beat.tick().await;
+    let mut beats = 0u64;
+    let mut series: Vec<SeriesPoint> = Vec::new();
     while started.elapsed() < opts.duration {
         tokio::select! {
             _ = stop.changed() => break,
-            _ = second.tick() => {}
+            _ = beat.tick() => {}
         }
+        beats += 1;
         let elapsed = started.elapsed();
         if opts.kill_after.is_some_and(|k| elapsed >= k) && !killed && agents.len() > 1 {
             killed = true;
@@ -252,11 +352,25 @@ pub async fn run(opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::Rece
             changes.push(MembersChange { at_s: elapsed.as_secs_f64(), event: "joined".into(), robot: a.0.to_string() });
             agents.push(a);
         }
-        if opts.view {
+        if let Some(web) = &web {
+            let o = observed.lock().expect("observer lock");
+            let summary = summarise(&o, opts.robots, &changes, models.manifest.fixture);
+            if beats % 5 == 0 {
+                series.push(SeriesPoint { accuracy: summary.accuracy.t, agreement: summary.agreement });
+                if series.len() > 300 {
+                    series.remove(0);
+                }
+            }
+            if let Some(state) = page_state(&o, &summary, opts.scenario as u8, &series) {
+                web.publish(serde_json::to_string(&state)?);
+            }
+        }
+        if opts.view && beats % 5 == 0 {
             let members: Vec<RobotId> = agents.iter().map(|a| a.0.clone()).collect();
             view(&observed.lock().expect("observer lock"), elapsed, &members);
         }
     }
+    let _ = web_stop.send(true);
 
     let _ = world_stop.send(true);
     let _ = world.await;

@@ -10,11 +10,13 @@
 //! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
+//! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
 //! ```
 
 pub mod appearance;
 pub mod camera;
 pub mod demo;
+pub mod demo_web;
 pub mod geometry;
 pub mod layout;
 pub mod service;

@@ -71,6 +71,9 @@ enum Command {
         /// No live view, only the summary.
         #[arg(long)]
         quiet: bool,
+        /// Serve a live page (floor map, votes, decision, accuracy) on this address.
+        #[arg(long, value_name = "ADDR")]
+        http: Option<std::net::SocketAddr>,
     },
     /// Measure how hard a scenario is (who sees the worker, detections, phases, goal changes).
     Stats {
@@ -119,7 +122,19 @@ fn run(args: Args) -> Result<()> {
                 spwi_sim::service::run(opts, rx).await
             })
         }
-        Command::Demo { robots, scenario, seed, duration, kill_after, join_after, models, layout: l, json, quiet } => {
+        Command::Demo {
+            robots,
+            scenario,
+            seed,
+            duration,
+            kill_after,
+            join_after,
+            models,
+            layout: l,
+            json,
+            quiet,
+            http,
+        } => {
             init_tracing(LogFormat::Human);
             let mut agent = spwi_agent::config::AgentConfig::load(None)?;
             if let Some(m) = models {
@@ -136,6 +151,8 @@ fn run(args: Args) -> Result<()> {
                 layout: layout(l)?,
                 agent,
                 view: !quiet,
+                http,
+                on_http: None,
             };
             let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
             let summary = rt.block_on(async {

@@ -25,6 +25,8 @@ async fn a_short_headless_demo_reports_every_robot_and_the_churn() {
                 ..Default::default()
             },
             view: false,
+            http: None,
+            on_http: None,
         };
         let (_stop, rx) = tokio::sync::watch::channel(false);
         let s = demo::run(opts, models(), rx).await.unwrap();
