@@ -212,7 +212,7 @@ fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bo
     }
 }
 
-fn view(o: &Observed, elapsed: Duration, members: &[RobotId]) {
+fn view(o: &Observed, elapsed: Duration, members: &[RobotId], summary: &Summary) {
     let Some((&tick, &(truth, _))) = o.truth.iter().next_back() else { return };
     let name = |c: u8| STATION_NAMES.get(c as usize).copied().unwrap_or("?");
     println!("── t = {:>5.1} s  tick {tick}  members {}", elapsed.as_secs_f64(), members.len());
@@ -234,6 +234,12 @@ fn view(o: &Observed, elapsed: Duration, members: &[RobotId]) {
         println!("   team decision (tick {t}): {now}   forecast every 0.5 s: {}", forecast.join(" → "));
     }
     println!("   truth: heading to {}", name(truth));
+    println!(
+        "   running accuracy at t {:.0}%, over the horizon {:.0}%, agreement {:.1}%",
+        summary.accuracy.t * 100.0,
+        summary.accuracy.future * 100.0,
+        summary.agreement * 100.0
+    );
 }
 
 /// Runs the demo and returns its summary.
@@ -367,7 +373,8 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
         }
         if opts.view && beats % 5 == 0 {
             let members: Vec<RobotId> = agents.iter().map(|a| a.0.clone()).collect();
-            view(&observed.lock().expect("observer lock"), elapsed, &members);
+            let o = observed.lock().expect("observer lock");
+            view(&o, elapsed, &members, &summarise(&o, opts.robots, &changes, models.manifest.fixture));
         }
     }
     let _ = web_stop.send(true);

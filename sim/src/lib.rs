@@ -8,6 +8,7 @@
 //! appearance.rs synthetic 512-d features (class prototypes + view, distance, posture)
 //! world.rs      one tick of everything, deterministic from a seed; scenarios 1-3
 //! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
+//! cli.rs        the `spwi-sim` command line
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
@@ -15,6 +16,7 @@
 
 pub mod appearance;
 pub mod camera;
+pub mod cli;
 pub mod demo;
 pub mod demo_web;
 pub mod geometry;

@@ -1,6 +1,7 @@
 //! The demo, headless and short: the world and three agents in one process, one agent
 //! stopped and one started mid-run; the summary must report decisions from every robot,
-//! the membership changes and an agreement rate. No assertion on speed.
+//! the membership changes and an agreement rate. Once through the library, once through
+//! the command line's `--json FILE`. No assertion on speed.
 //! Run: `cargo test -p spwi-tests --test demo`.
 
 use spwi_sim::demo::{self, DemoOptions};
@@ -39,4 +40,28 @@ async fn a_short_headless_demo_reports_every_robot_and_the_churn() {
         assert!(s.messages_per_tick > 3.0 && s.bytes_per_tick > 1000.0, "{s:?}");
         assert!(s.fixture_models);
     });
+}
+
+#[test]
+fn the_demo_command_writes_its_json_summary() {
+    let file = std::env::temp_dir().join(format!("spwi-demo-{}.json", std::process::id()));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_spwi-test-sim"))
+        .args(["demo", "--robots", "2", "--duration", "4s", "--quiet", "--json"])
+        .arg(&file)
+        .arg("--models")
+        .arg(models_dir())
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run spwi-sim demo");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    assert_eq!(s["robots"], 2);
+    for r in ["robot0", "robot1"] {
+        assert!(s["decisions"][r].as_u64().unwrap() > 10, "{s}");
+    }
+    for key in ["agreement", "ticks", "members_changes", "latency_ms", "accuracy"] {
+        assert!(!s[key].is_null(), "summary lacks {key}: {s}");
+    }
+    assert!((0.0..=1.0).contains(&s["agreement"].as_f64().unwrap()));
+    std::fs::remove_file(file).unwrap();
 }

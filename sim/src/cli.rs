@@ -1,0 +1,210 @@
+//! The `spwi-sim` command line: `world`, `demo`, `stats`.
+
+use crate::layout::Layout;
+use crate::world::Scenario;
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use spwi_agent::cli::{init_tracing, spawn_signal_handler};
+use spwi_agent::config::LogFormat;
+use spwi_proto::FleetId;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+#[derive(Parser)]
+#[command(name = "spwi-sim", version, about = "The simulated factory that stands in for Isaac Sim")]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Publish every live agent's detections and the truth over Zenoh at 10 Hz.
+    World {
+        #[arg(long, default_value = "default")]
+        fleet: FleetId,
+        /// 1: no obstacles, stationary robots; 2: static obstacles; 3: obstacles and moving robots.
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Layout file (TOML); default: the built-in sim/layouts/factory.toml.
+        #[arg(long)]
+        layout: Option<PathBuf>,
+        /// Zenoh's own config file (json5).
+        #[arg(long, env = "ZENOH_CONFIG")]
+        zenoh_config: Option<PathBuf>,
+        /// Zenoh setting override KEY:VALUE (VALUE in json5), repeatable.
+        #[arg(long = "cfg", value_name = "KEY:VALUE")]
+        cfg: Vec<String>,
+        /// Tick period in milliseconds.
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+        tick_ms: u64,
+    },
+    /// Watch a fleet decide: the world and N agents in this process, a live view each
+    /// second, a summary at the end (or on Ctrl-C).
+    Demo {
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=8))]
+        robots: u64,
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// How long to run (e.g. 60s, 2m).
+        #[arg(long, default_value = "60s", value_parser = crate::demo::parse_duration)]
+        duration: Duration,
+        /// Stop one agent after this long, to watch the fleet shrink.
+        #[arg(long, value_parser = crate::demo::parse_duration)]
+        kill_after: Option<Duration>,
+        /// Start one more agent after this long, to watch it join.
+        #[arg(long, value_parser = crate::demo::parse_duration)]
+        join_after: Option<Duration>,
+        /// Model set folder (default: the agent's default).
+        #[arg(long)]
+        models: Option<PathBuf>,
+        #[arg(long)]
+        layout: Option<PathBuf>,
+        /// Write the summary as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// No live view, only the summary.
+        #[arg(long)]
+        quiet: bool,
+        /// Serve a live page (floor map, votes, decision, accuracy) on this address.
+        #[arg(long, value_name = "ADDR")]
+        http: Option<std::net::SocketAddr>,
+    },
+    /// Measure how hard a scenario is (who sees the worker, detections, phases, goal changes).
+    Stats {
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        #[arg(long, default_value_t = 4)]
+        robots: usize,
+        #[arg(long, default_value_t = 20)]
+        episodes: u32,
+        /// Ticks per episode (10 per second).
+        #[arg(long, default_value_t = 600)]
+        ticks: u32,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long)]
+        layout: Option<PathBuf>,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn layout(path: Option<PathBuf>) -> Result<Layout> {
+    match path {
+        Some(p) => Layout::load(&p),
+        None => Ok(Layout::default_layout()),
+    }
+}
+
+fn run(args: Args) -> Result<()> {
+    match args.command {
+        Command::World { fleet, scenario, seed, layout: l, zenoh_config, cfg, tick_ms } => {
+            init_tracing(LogFormat::Human);
+            let opts = crate::service::WorldOptions {
+                fleet,
+                scenario: Scenario::from_number(scenario)?,
+                seed,
+                layout: layout(l)?,
+                zenoh: spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?,
+                tick: Duration::from_millis(tick_ms),
+            };
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            rt.block_on(async {
+                let (tx, rx) = tokio::sync::watch::channel(false);
+                spawn_signal_handler(tx);
+                crate::service::run(opts, rx).await
+            })
+        }
+        Command::Demo {
+            robots,
+            scenario,
+            seed,
+            duration,
+            kill_after,
+            join_after,
+            models,
+            layout: l,
+            json,
+            quiet,
+            http,
+        } => {
+            init_tracing(LogFormat::Human);
+            let mut agent = spwi_agent::config::AgentConfig::load(None)?;
+            if let Some(m) = models {
+                agent.models.dir = m;
+            }
+            let set = spwi_agent::daemon::load_models(&agent)?;
+            let opts = crate::demo::DemoOptions {
+                robots: robots as usize,
+                scenario: Scenario::from_number(scenario)?,
+                seed,
+                duration,
+                kill_after,
+                join_after,
+                layout: layout(l)?,
+                agent,
+                view: !quiet,
+                http,
+                on_http: None,
+            };
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            let summary = rt.block_on(async {
+                let (tx, rx) = tokio::sync::watch::channel(false);
+                spawn_signal_handler(tx);
+                crate::demo::run(opts, set, rx).await
+            })?;
+            println!("\n{}", serde_json::to_string_pretty(&summary)?);
+            if let Some(path) = json {
+                std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+                    .map_err(|e| anyhow::anyhow!("--json {}: {e}", path.display()))?;
+            }
+            Ok(())
+        }
+        Command::Stats { scenario, robots, episodes, ticks, seed, layout: l, json } => {
+            let l = layout(l)?;
+            if robots == 0 || robots > l.robots.len() {
+                anyhow::bail!("--robots {robots}: the layout has slots for 1..={} robots", l.robots.len());
+            }
+            let d = crate::stats::measure(&l, Scenario::from_number(scenario)?, robots, episodes, ticks, seed);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&d)?);
+            } else {
+                println!(
+                    "scenario {} — {} episodes × {} ticks, {} robots, seed {seed}",
+                    d.scenario, episodes, ticks, robots
+                );
+                let seen: Vec<String> = d.worker_seen.iter().map(|s| format!("{:.0}%", s * 100.0)).collect();
+                println!("  worker seen, per robot        {}", seen.join("  "));
+                println!("  no robot sees the worker      {:.1}%", d.nobody_sees_worker * 100.0);
+                println!("  detections per frame          {:.2}", d.mean_detections_per_frame);
+                println!(
+                    "  phases: moving / transition / stationary   {:.0}% / {:.0}% / {:.0}%",
+                    d.phase_moving * 100.0,
+                    d.phase_transition * 100.0,
+                    d.phase_stationary * 100.0
+                );
+                println!("  goal changes per trip         {:.2}", d.goal_changes_per_trip);
+                println!("  near both close stations      {:.1}%", d.near_close_stations * 100.0);
+            }
+            Ok(())
+        }
+    }
+}
+
+/// `main` of `spwi-sim`.
+pub fn main() -> ExitCode {
+    match run(Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("spwi-sim: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
