@@ -361,7 +361,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
         if let Some(web) = &web {
             let o = observed.lock().expect("observer lock");
             let summary = summarise(&o, opts.robots, &changes, models.manifest.fixture);
-            if beats % 5 == 0 {
+            if beats.is_multiple_of(5) {
                 series.push(SeriesPoint { accuracy: summary.accuracy.t, agreement: summary.agreement });
                 if series.len() > 300 {
                     series.remove(0);
@@ -371,7 +371,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
                 web.publish(serde_json::to_string(&state)?);
             }
         }
-        if opts.view && beats % 5 == 0 {
+        if opts.view && beats.is_multiple_of(5) {
             let members: Vec<RobotId> = agents.iter().map(|a| a.0.clone()).collect();
             let o = observed.lock().expect("observer lock");
             view(&o, elapsed, &members, &summarise(&o, opts.robots, &changes, models.manifest.fixture));
