@@ -75,6 +75,48 @@ enum Command {
         #[arg(long, value_name = "ADDR")]
         http: Option<std::net::SocketAddr>,
     },
+    /// Export training data (.npy arrays + dataset.json) for the models.
+    Dataset {
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        #[arg(long, default_value_t = 100)]
+        episodes: u32,
+        #[arg(long, default_value_t = 4)]
+        robots: usize,
+        /// Ticks per episode (10 per second).
+        #[arg(long, default_value_t = 300)]
+        ticks: u32,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long)]
+        out: PathBuf,
+        /// Keep the graph of every Nth tick per robot for the spatial part.
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
+        spatial_every: u32,
+        /// A model set whose GCN computes the temporal part's embeddings (via the agent's code).
+        #[arg(long, value_name = "MODEL_SET")]
+        gcn: Option<PathBuf>,
+        /// Graph size when no --gcn is given (with --gcn: the manifest's).
+        #[arg(long, default_value_t = 16)]
+        max_nodes: usize,
+        #[arg(long)]
+        layout: Option<PathBuf>,
+    },
+    /// Draw the floor and every robot's detections at one tick into a PNG.
+    Render {
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long, default_value_t = 100)]
+        tick: u64,
+        #[arg(long, default_value_t = 4)]
+        robots: usize,
+        #[arg(long, default_value = "scene.png")]
+        out: PathBuf,
+        #[arg(long)]
+        layout: Option<PathBuf>,
+    },
     /// Measure how hard a scenario is (who sees the worker, detections, phases, goal changes).
     Stats {
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
@@ -165,6 +207,55 @@ fn run(args: Args) -> Result<()> {
                 std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
                     .map_err(|e| anyhow::anyhow!("--json {}: {e}", path.display()))?;
             }
+            Ok(())
+        }
+        Command::Dataset { scenario, episodes, robots, ticks, seed, out, spatial_every, gcn, max_nodes, layout: l } => {
+            let l = layout(l)?;
+            if robots == 0 || robots > l.robots.len() {
+                anyhow::bail!("--robots {robots}: the layout has slots for 1..={} robots", l.robots.len());
+            }
+            if episodes == 0 || ticks == 0 {
+                anyhow::bail!("--episodes and --ticks must be at least 1");
+            }
+            let gcn = gcn
+                .map(|dir| spwi_agent::model::ModelSet::load(&dir, spwi_agent::model::Backend::Tract, None))
+                .transpose()?;
+            let (max_nodes, edge_weight) = match &gcn {
+                Some(m) => (m.manifest.max_nodes, m.manifest.edge_weight),
+                None => (max_nodes, spwi_agent::graph::EdgeWeight::Proximity),
+            };
+            if !(1..=256).contains(&max_nodes) {
+                anyhow::bail!("--max-nodes {max_nodes}: must be within 1..=256");
+            }
+            let started = std::time::Instant::now();
+            let (samples, rows) = crate::dataset::export(&crate::dataset::DatasetOptions {
+                scenario: Scenario::from_number(scenario)?,
+                episodes,
+                robots,
+                ticks,
+                seed,
+                out: out.clone(),
+                spatial_every,
+                layout: l,
+                max_nodes,
+                edge_weight,
+                gcn,
+            })?;
+            println!(
+                "wrote {} ({samples} graph samples, {rows} temporal rows) in {:.1} s",
+                out.display(),
+                started.elapsed().as_secs_f64()
+            );
+            Ok(())
+        }
+        Command::Render { scenario, seed, tick, robots, out, layout: l } => {
+            let l = layout(l)?;
+            if robots == 0 || robots > l.robots.len() {
+                anyhow::bail!("--robots {robots}: the layout has slots for 1..={} robots", l.robots.len());
+            }
+            let world = crate::world::World::new(l, Scenario::from_number(scenario)?, seed, robots);
+            crate::render::render_tick(world, robots, tick, &out)?;
+            println!("wrote {}", out.display());
             Ok(())
         }
         Command::Stats { scenario, robots, episodes, ticks, seed, layout: l, json } => {

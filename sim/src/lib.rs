@@ -9,6 +9,9 @@
 //! world.rs      one tick of everything, deterministic from a seed; scenarios 1-3
 //! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
 //! cli.rs        the `spwi-sim` command line
+//! dataset.rs    `spwi-sim dataset`: training data (.npy), graphs built by the agent's code
+//! npy.rs        a streaming .npy writer
+//! render.rs     `spwi-sim render`: a top-down PNG and each camera's detections
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
@@ -17,10 +20,13 @@
 pub mod appearance;
 pub mod camera;
 pub mod cli;
+pub mod dataset;
 pub mod demo;
 pub mod demo_web;
 pub mod geometry;
 pub mod layout;
+pub mod npy;
+pub mod render;
 pub mod service;
 pub mod skeleton;
 pub mod stats;

@@ -1,0 +1,365 @@
+//! `spwi-sim dataset`: training data that NumPy and PyTorch read directly.
+//!
+//! Two parts, so that no export needs more than a few GB:
+//!
+//! - `spatial/`: graph inputs (node features, normalised adjacency, node mask) for a
+//!   sample of frames — every `spatial_every`-th tick of each robot that sees the
+//!   worker — built by the agent's own [`GraphBuilder`], labelled with the current
+//!   intent. Enough to train the GCN; a 1024-d feature on every node of every frame
+//!   would run to tens of GB.
+//! - `temporal/`: one row per (episode, tick, robot), ordered so the arrays reshape to
+//!   `[episodes, ticks, robots, …]`: keypoints, visibility, whether the worker is seen,
+//!   the truth now and for the next 30 ticks, the worker's phase; and, given a trained
+//!   GCN (`--gcn MODEL_SET`), its embedding and logits computed by the agent's own
+//!   inference code — so training and serving cannot drift apart.
+//!
+//! Episodes are split 60/20/20 (train/validation/test) by episode index, as in the paper.
+//! `dataset.json` describes every array.
+
+use crate::layout::Layout;
+use crate::npy::NpyWriter;
+use crate::world::{Scenario, World};
+use anyhow::{Context, Result};
+use serde_json::json;
+use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
+use spwi_agent::model::ModelSet;
+use spwi_agent::temporal::{normalise_keypoints, TemporalModel};
+use spwi_proto::{RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Future ticks of truth stored with every row.
+pub const FUTURE: usize = 30;
+
+pub struct DatasetOptions {
+    pub scenario: Scenario,
+    pub episodes: u32,
+    pub robots: usize,
+    pub ticks: u32,
+    pub seed: u64,
+    pub out: PathBuf,
+    pub spatial_every: u32,
+    pub layout: Layout,
+    /// Graph size and edge weights; from the GCN's manifest when given.
+    pub max_nodes: usize,
+    pub edge_weight: spwi_agent::graph::EdgeWeight,
+    pub gcn: Option<Arc<ModelSet>>,
+}
+
+/// 0 train, 1 validation, 2 test: 60/20/20 by episode index.
+pub fn split(episode: u32, episodes: u32) -> u8 {
+    let at = episode as u64 * 10;
+    if at < episodes as u64 * 6 {
+        0
+    } else if at < episodes as u64 * 8 {
+        1
+    } else {
+        2
+    }
+}
+
+fn phase_id(p: WorkerPhase) -> u8 {
+    match p {
+        WorkerPhase::Moving => 0,
+        WorkerPhase::Transition => 1,
+        WorkerPhase::Stationary => 2,
+    }
+}
+
+/// The seed of episode `e` of a dataset seeded `seed` (disjoint across seeds).
+pub fn episode_seed(seed: u64, e: u32) -> u64 {
+    seed.wrapping_mul(1_000_003).wrapping_add(e as u64)
+}
+
+struct Spatial {
+    x: NpyWriter<f32>,
+    adj: NpyWriter<f32>,
+    mask: NpyWriter<u8>,
+    label: NpyWriter<u8>,
+    episode: NpyWriter<u32>,
+    split: NpyWriter<u8>,
+    robot: NpyWriter<u8>,
+    tick: NpyWriter<u32>,
+}
+
+struct Temporal {
+    keypoints: NpyWriter<f32>,
+    seen: NpyWriter<u8>,
+    visibility: NpyWriter<u32>,
+    truth: NpyWriter<u8>,
+    phase: NpyWriter<u8>,
+    episode: NpyWriter<u32>,
+    split: NpyWriter<u8>,
+    robot: NpyWriter<u8>,
+    tick: NpyWriter<u32>,
+    embedding: Option<NpyWriter<f32>>,
+    gcn_logits: Option<NpyWriter<f32>>,
+}
+
+/// One robot's row of one tick, held until the future truth is known.
+struct Pending {
+    keypoints: Vec<f32>,
+    seen: bool,
+    visibility: u32,
+    embedding: Vec<f32>,
+    logits: [f32; NUM_CLASSES],
+}
+
+/// Writes the dataset; returns (spatial samples, temporal rows).
+pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
+    let (sd, td) = (o.out.join("spatial"), o.out.join("temporal"));
+    std::fs::create_dir_all(&sd)
+        .and_then(|_| std::fs::create_dir_all(&td))
+        .with_context(|| format!("cannot create {}", o.out.display()))?;
+    let n = o.max_nodes;
+    let f = |d: &Path, name: &str| d.join(format!("{name}.npy"));
+    let mut sp = Spatial {
+        x: NpyWriter::create(&f(&sd, "x"), &[n, NODE_FEATURE_DIM])?,
+        adj: NpyWriter::create(&f(&sd, "adj"), &[n, n])?,
+        mask: NpyWriter::create(&f(&sd, "node_mask"), &[n])?,
+        label: NpyWriter::create(&f(&sd, "label"), &[])?,
+        episode: NpyWriter::create(&f(&sd, "episode"), &[])?,
+        split: NpyWriter::create(&f(&sd, "split"), &[])?,
+        robot: NpyWriter::create(&f(&sd, "robot"), &[])?,
+        tick: NpyWriter::create(&f(&sd, "tick"), &[])?,
+    };
+    let mut tp = Temporal {
+        keypoints: NpyWriter::create(&f(&td, "keypoints"), &[KEYPOINT_VALUES])?,
+        seen: NpyWriter::create(&f(&td, "seen"), &[])?,
+        visibility: NpyWriter::create(&f(&td, "visibility"), &[])?,
+        truth: NpyWriter::create(&f(&td, "truth"), &[FUTURE + 1])?,
+        phase: NpyWriter::create(&f(&td, "phase"), &[])?,
+        episode: NpyWriter::create(&f(&td, "episode"), &[])?,
+        split: NpyWriter::create(&f(&td, "split"), &[])?,
+        robot: NpyWriter::create(&f(&td, "robot"), &[])?,
+        tick: NpyWriter::create(&f(&td, "tick"), &[])?,
+        embedding: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "embedding"), &[EMBEDDING_DIM])).transpose()?,
+        gcn_logits: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "gcn_logits"), &[NUM_CLASSES])).transpose()?,
+    };
+    let mut inference = o.gcn.as_ref().map(|m| m.inference(TemporalModel::Ego)).transpose()?;
+    let mut graph = GraphBuilder::new(n, o.edge_weight);
+    let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("r{i}"))).collect::<Result<_, _>>()?;
+    let started = Instant::now();
+    let mut last_report = 0;
+    for e in 0..o.episodes {
+        let mut world = World::new(o.layout.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
+        let total = o.ticks as usize + FUTURE;
+        let mut intents = Vec::with_capacity(total);
+        let mut phases = Vec::with_capacity(total);
+        let mut rows: Vec<Vec<Pending>> = Vec::with_capacity(o.ticks as usize);
+        for t in 0..total as u32 {
+            world.step();
+            intents.push(world.worker.goal);
+            phases.push(phase_id(world.worker.phase));
+            if t >= o.ticks {
+                continue; // only the truth of these ticks is needed
+            }
+            let mut tick_rows = Vec::with_capacity(o.robots);
+            for (slot, id) in ids.iter().enumerate() {
+                let frame = world.observe(slot, id);
+                let keypoints = frame
+                    .human
+                    .as_ref()
+                    .map(|h| normalise_keypoints(&h.keypoints, frame.image_size))
+                    .unwrap_or_else(|| vec![0.0; KEYPOINT_VALUES]);
+                let mut row = Pending {
+                    keypoints,
+                    seen: frame.human.is_some(),
+                    visibility: frame.visibility(),
+                    embedding: vec![0.0; EMBEDDING_DIM],
+                    logits: [0.0; NUM_CLASSES],
+                };
+                if let Some(g) = graph.build(&frame) {
+                    if t % o.spatial_every == 0 {
+                        sp.x.push(&g.x)?;
+                        sp.adj.push(&g.adj)?;
+                        let mask: Vec<u8> = (0..n).map(|i| u8::from(i < g.nodes)).collect();
+                        sp.mask.push(&mask)?;
+                        sp.label.push(&[world.worker.goal])?;
+                        sp.episode.push(&[e])?;
+                        sp.split.push(&[split(e, o.episodes)])?;
+                        sp.robot.push(&[slot as u8])?;
+                        sp.tick.push(&[t])?;
+                    }
+                    if let Some(inf) = inference.as_mut() {
+                        let out = inf.gcn(g)?;
+                        row.embedding = out.embedding;
+                        row.logits = out.logits;
+                    }
+                }
+                tick_rows.push(row);
+            }
+            rows.push(tick_rows);
+        }
+        for (t, tick_rows) in rows.into_iter().enumerate() {
+            let truth = &intents[t..=t + FUTURE];
+            for (slot, r) in tick_rows.into_iter().enumerate() {
+                tp.keypoints.push(&r.keypoints)?;
+                tp.seen.push(&[u8::from(r.seen)])?;
+                tp.visibility.push(&[r.visibility])?;
+                tp.truth.push(truth)?;
+                tp.phase.push(&[phases[t]])?;
+                tp.episode.push(&[e])?;
+                tp.split.push(&[split(e, o.episodes)])?;
+                tp.robot.push(&[slot as u8])?;
+                tp.tick.push(&[t as u32])?;
+                if let (Some(em), Some(lg)) = (tp.embedding.as_mut(), tp.gcn_logits.as_mut()) {
+                    em.push(&r.embedding)?;
+                    lg.push(&r.logits)?;
+                }
+            }
+        }
+        let pct = (e + 1) * 100 / o.episodes;
+        if pct >= last_report + 5 || e + 1 == o.episodes {
+            last_report = pct;
+            let el = started.elapsed().as_secs_f64();
+            let eta = el / (e + 1) as f64 * (o.episodes - e - 1) as f64;
+            eprintln!("[{:>3}%] {} / {} episodes, {:.0} s elapsed, ~{:.0} s to go", pct, e + 1, o.episodes, el, eta);
+        }
+    }
+    let samples = sp.label.rows();
+    let rows = tp.tick.rows();
+    for w in [sp.x, sp.adj] {
+        w.finish()?;
+    }
+    for w in [sp.mask, sp.label, sp.split, sp.robot] {
+        w.finish()?;
+    }
+    sp.episode.finish()?;
+    sp.tick.finish()?;
+    tp.keypoints.finish()?;
+    for w in [tp.seen, tp.truth, tp.phase, tp.split, tp.robot] {
+        w.finish()?;
+    }
+    for w in [tp.visibility, tp.episode, tp.tick] {
+        w.finish()?;
+    }
+    if let (Some(em), Some(lg)) = (tp.embedding, tp.gcn_logits) {
+        em.finish()?;
+        lg.finish()?;
+    }
+    let description = json!({
+        "scenario": o.scenario as u8,
+        "episodes": o.episodes,
+        "robots": o.robots,
+        "ticks_per_episode": o.ticks,
+        "seed": o.seed,
+        "episode_seed": "seed * 1000003 + episode",
+        "split": "by episode index: first 60% train (0), next 20% validation (1), last 20% test (2)",
+        "classes": spwi_proto::STATION_NAMES,
+        "max_nodes": n,
+        "edge_weight": o.edge_weight,
+        "gcn": o.gcn.as_ref().map(|m| json!({"model_set": m.manifest.name, "dir": m.dir})),
+        "spatial": {
+            "samples": samples,
+            "sampling": format!("every {}th tick of each robot, when it sees the worker", o.spatial_every),
+            "arrays": {
+                "x": ["float32", ["samples", n, NODE_FEATURE_DIM], "node features: global scene feature ‖ local feature; node 0 is the worker; padding rows are zero"],
+                "adj": ["float32", ["samples", n, n], "normalised adjacency D^-1/2 (A + I) D^-1/2 of the star graph, zero padding"],
+                "node_mask": ["uint8", ["samples", n], "1 for real nodes"],
+                "label": ["uint8", ["samples"], "station the worker is heading to now"],
+                "episode": ["uint32", ["samples"], "episode index"],
+                "split": ["uint8", ["samples"], "0 train, 1 validation, 2 test"],
+                "robot": ["uint8", ["samples"], "robot slot"],
+                "tick": ["uint32", ["samples"], "tick within the episode"],
+            }
+        },
+        "temporal": {
+            "rows": rows,
+            "order": "episode-major, then tick, then robot: reshape to [episodes, ticks, robots, ...]",
+            "arrays": {
+                "keypoints": ["float32", ["rows", KEYPOINT_VALUES], "17 COCO keypoints (x, y) / image size; zeros when the worker is not seen"],
+                "seen": ["uint8", ["rows"], "1 when the robot detects the worker"],
+                "visibility": ["uint32", ["rows"], "detections in the frame (worker + objects): N_detected"],
+                "truth": ["uint8", ["rows", FUTURE + 1], "intent at t, t+1, ..., t+30"],
+                "phase": ["uint8", ["rows"], "0 moving, 1 transition (goal changed within 2 s), 2 stationary"],
+                "episode": ["uint32", ["rows"], "episode index"],
+                "split": ["uint8", ["rows"], "0 train, 1 validation, 2 test"],
+                "robot": ["uint8", ["rows"], "robot slot"],
+                "tick": ["uint32", ["rows"], "tick within the episode"],
+                "embedding": ["float32", ["rows", EMBEDDING_DIM], "GCN embedding of the worker node (only with --gcn; zeros when not seen)"],
+                "gcn_logits": ["float32", ["rows", NUM_CLASSES], "GCN logits (only with --gcn; zeros when not seen)"],
+            }
+        }
+    });
+    std::fs::write(o.out.join("dataset.json"), serde_json::to_string_pretty(&description)?)?;
+    Ok((samples, rows))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn export_to(dir: &Path, gcn: Option<Arc<ModelSet>>) -> (u64, u64) {
+        let _ = std::fs::remove_dir_all(dir);
+        export(&DatasetOptions {
+            scenario: Scenario::Dynamic,
+            episodes: 5,
+            robots: 2,
+            ticks: 40,
+            seed: 3,
+            out: dir.to_owned(),
+            spatial_every: 2,
+            layout: Layout::default_layout(),
+            max_nodes: 16,
+            edge_weight: spwi_agent::graph::EdgeWeight::Proximity,
+            gcn,
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn splits_are_60_20_20_by_episode() {
+        let counts = (0..10).fold([0; 3], |mut c, e| {
+            c[split(e, 10) as usize] += 1;
+            c
+        });
+        assert_eq!(counts, [6, 2, 2]);
+    }
+
+    #[test]
+    fn export_sizes_match_the_description_and_the_same_seed_gives_the_same_bytes() {
+        let base = std::env::temp_dir().join(format!("spwi-dataset-{}", std::process::id()));
+        let gcn = ModelSet::load(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture"),
+            spwi_agent::model::Backend::Tract,
+            None,
+        )
+        .unwrap();
+        let (samples, rows) = export_to(&base.join("a"), Some(gcn.clone()));
+        assert_eq!(rows, 5 * 40 * 2);
+        assert!(samples > 0 && samples <= 5 * 20 * 2);
+        // bytes after the .npy header (its length is at offset 8)
+        let data = |p: &str| {
+            let b = std::fs::read(base.join("a").join(p)).unwrap();
+            (b.len() - 10 - u16::from_le_bytes([b[8], b[9]]) as usize) as u64
+        };
+        assert_eq!(data("spatial/x.npy"), samples * 16 * 1024 * 4);
+        assert_eq!(data("spatial/adj.npy"), samples * 16 * 16 * 4);
+        assert_eq!(data("spatial/label.npy"), samples);
+        assert_eq!(data("temporal/truth.npy"), rows * 31);
+        assert_eq!(data("temporal/embedding.npy"), rows * 128 * 4);
+        assert_eq!(data("temporal/tick.npy"), rows * 4);
+        let described: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(base.join("a/dataset.json")).unwrap()).unwrap();
+        assert_eq!(described["temporal"]["rows"], rows);
+        assert_eq!(described["spatial"]["samples"], samples);
+
+        export_to(&base.join("b"), Some(gcn));
+        for f in [
+            "spatial/x.npy",
+            "spatial/adj.npy",
+            "temporal/truth.npy",
+            "temporal/embedding.npy",
+            "temporal/keypoints.npy",
+        ] {
+            assert_eq!(
+                std::fs::read(base.join("a").join(f)).unwrap(),
+                std::fs::read(base.join("b").join(f)).unwrap(),
+                "{f} differs"
+            );
+        }
+        std::fs::remove_dir_all(base).unwrap();
+    }
+}
