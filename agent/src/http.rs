@@ -36,7 +36,8 @@ pub async fn serve(
     Ok((bound, fut))
 }
 
-async fn answer(mut stream: tokio::net::TcpStream, status: SharedStatus) -> std::io::Result<()> {
+/// Reads a request head (at most 4 KiB) and returns its method and path.
+pub async fn read_request(stream: &mut tokio::net::TcpStream) -> std::io::Result<(String, String)> {
     let mut buf = vec![0u8; 4096];
     let mut n = 0;
     while n < buf.len() {
@@ -48,8 +49,12 @@ async fn answer(mut stream: tokio::net::TcpStream, status: SharedStatus) -> std:
     }
     let request = String::from_utf8_lossy(&buf[..n]);
     let mut words = request.split_whitespace();
-    let (method, path) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
-    let (code, kind, body) = match (method, path) {
+    Ok((words.next().unwrap_or("").to_owned(), words.next().unwrap_or("").to_owned()))
+}
+
+async fn answer(mut stream: tokio::net::TcpStream, status: SharedStatus) -> std::io::Result<()> {
+    let (method, path) = read_request(&mut stream).await?;
+    let (code, kind, body) = match (method.as_str(), path.as_str()) {
         ("GET", "/healthz") => (200, "text/plain", "ok\n".to_owned()),
         ("GET", "/status") => {
             let s = status.lock().map(|s| serde_json::to_string_pretty(&*s)).unwrap_or_else(|_| Ok("{}".into()));

@@ -7,7 +7,7 @@
 use anyhow::Result;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::AsyncWriteExt;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{broadcast, watch};
 
@@ -60,24 +60,14 @@ pub async fn serve(
 }
 
 async fn answer(mut stream: TcpStream, web: Arc<Web>, mut stop: watch::Receiver<bool>) -> std::io::Result<()> {
-    let mut buf = vec![0u8; 4096];
-    let mut n = 0;
-    while n < buf.len() {
-        let m = stream.read(&mut buf[n..]).await?;
-        n += m;
-        if m == 0 || buf[..n].windows(4).any(|w| w == b"\r\n\r\n") {
-            break;
-        }
-    }
-    let request = String::from_utf8_lossy(&buf[..n]);
-    let path = request.split_whitespace().nth(1).unwrap_or("/");
+    let (_, path) = spwi_agent::http::read_request(&mut stream).await?;
     let reply = |code: &str, kind: &str, body: &str| {
         format!(
             "HTTP/1.1 {code}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
             body.len()
         )
     };
-    match path {
+    match path.as_str() {
         "/" | "/index.html" => stream.write_all(reply("200 OK", "text/html; charset=utf-8", PAGE).as_bytes()).await?,
         "/layout" => stream.write_all(reply("200 OK", "application/json", &web.layout).as_bytes()).await?,
         "/events" => {

@@ -53,30 +53,10 @@ impl Rect {
         [p[0].clamp(self.min[0], self.max[0]), p[1].clamp(self.min[1], self.max[1])]
     }
 
-    /// Whether the open segment a→b passes through the box's interior
-    /// (slab method, with a small tolerance so grazing an edge does not count).
+    /// Whether the open segment a→b passes through the box's interior (with a small
+    /// tolerance, so grazing an edge does not count).
     pub fn blocks(&self, a: P2, b: P2) -> bool {
-        let shrunk = self.inflate(-1e-3);
-        let (mut t0, mut t1) = (0.0f32, 1.0f32);
-        let d = sub(b, a);
-        for k in 0..2 {
-            if d[k].abs() < 1e-9 {
-                if a[k] < shrunk.min[k] || a[k] > shrunk.max[k] {
-                    return false;
-                }
-            } else {
-                let (mut ta, mut tb) = ((shrunk.min[k] - a[k]) / d[k], (shrunk.max[k] - a[k]) / d[k]);
-                if ta > tb {
-                    std::mem::swap(&mut ta, &mut tb);
-                }
-                t0 = t0.max(ta);
-                t1 = t1.min(tb);
-                if t0 > t1 {
-                    return false;
-                }
-            }
-        }
-        true
+        self.inflate(-1e-3).entry(a, b).is_some()
     }
 
     /// Distance along a→b (as a fraction) at which the segment enters the box, if it does.

@@ -277,6 +277,18 @@ impl ProcessAgent {
         ProcessAgent { robot: robot.clone(), child }
     }
 
+    /// Waits (polling) for the process to exit, at most `limit`.
+    pub async fn wait_exit(&mut self, limit: Duration) -> std::process::ExitStatus {
+        let deadline = Instant::now() + limit;
+        loop {
+            if let Some(s) = self.child.try_wait().expect("try_wait") {
+                return s;
+            }
+            assert!(Instant::now() < deadline, "{} did not exit within {limit:?}", self.robot);
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+
     pub fn signal(&self, sig: &str) {
         let ok =
             Command::new("kill").args([&format!("-{sig}"), &self.child.id().to_string()]).status().unwrap().success();

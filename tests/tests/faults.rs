@@ -146,14 +146,7 @@ async fn a_second_daemon_with_a_taken_robot_id_is_refused() {
         let a = InProcessAgent::start(&hub, &id("same"), &models, AgentConfig::default()).await;
         tokio::time::sleep(Duration::from_millis(500)).await;
         let mut second = ProcessAgent::start(EXE, &hub, &id("same"));
-        let status = within!(20, "the second daemon to exit", async {
-            loop {
-                if let Some(s) = second.child.try_wait().unwrap() {
-                    break s;
-                }
-                tokio::time::sleep(Duration::from_millis(50)).await;
-            }
-        });
+        let status = second.wait_exit(Duration::from_secs(20)).await;
         assert!(!status.success(), "a daemon with a taken robot id must refuse to start");
         a.stop().await;
     });

@@ -79,14 +79,7 @@ async fn sigterm_leaves_the_fleet_cleanly() {
         leaves.signal("TERM");
         let took = collector.wait_members(&ids[..1], 1, t0, Duration::from_millis(1500)).await;
         eprintln!("SIGTERM: out of the vote in {took:?}");
-        let status = within!(10, "the agent to exit", async {
-            loop {
-                if let Some(s) = leaves.child.try_wait().unwrap() {
-                    break s;
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-        });
+        let status = leaves.wait_exit(Duration::from_secs(10)).await;
         assert!(status.success(), "SIGTERM must end the daemon cleanly: {status}");
         stays.stop().await;
     });
