@@ -1,0 +1,168 @@
+//! Per-stage latency of one robot's tick, single-threaded, batch 1:
+//! star graph, GCN, ego-GRU, collective-GRU, vote + consensus, a whole tick through the
+//! engine, and encode/decode of every message. Reports p50 / p99 / mean per call.
+//!
+//! Run: `cargo bench -p spwi-agent --bench stages` (add `--features ort` and set
+//! ORT_DYLIB_PATH to include ONNX Runtime). `SPWI_BENCH_MODELS=DIR` picks a model set
+//! (default: models/fixture, which has the trained models' shapes).
+
+use spwi_agent::consensus::{self, Ballot, Weights};
+use spwi_agent::engine::{Engine, EngineConfig, Input};
+use spwi_agent::graph::GraphBuilder;
+use spwi_agent::model::{Backend, ModelSet};
+use spwi_agent::temporal::{TemporalModel, COLLECTIVE_DIM, EGO_DIM};
+use spwi_agent::vote;
+use spwi_proto::*;
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+fn measure(name: &str, iters: usize, mut f: impl FnMut()) {
+    for _ in 0..iters / 10 {
+        f();
+    }
+    let mut t: Vec<Duration> = (0..iters)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed()
+        })
+        .collect();
+    t.sort();
+    let us = |d: Duration| d.as_secs_f64() * 1e6;
+    let mean = t.iter().map(|d| us(*d)).sum::<f64>() / t.len() as f64;
+    println!("{name:<34} p50 {:>9.1} µs   p99 {:>9.1} µs   mean {:>9.1} µs", us(t[t.len() / 2]), us(t[t.len() * 99 / 100]), mean);
+}
+
+fn frame(tick: u64, objects: usize) -> DetectionFrame {
+    let feat = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.01 + k).sin()).collect::<Vec<_>>();
+    DetectionFrame {
+        robot: RobotId::new("bench").unwrap(),
+        tick,
+        image_size: [640.0, 480.0],
+        human: Some(HumanDetection {
+            bbox: BBox { x: 300.0, y: 100.0, w: 50.0, h: 200.0 },
+            keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32).collect(),
+            feature: feat(1.0),
+        }),
+        objects: (0..objects)
+            .map(|k| ObjectDetection {
+                class: ObjectClass::ALL[k % 10],
+                bbox: BBox { x: 40.0 * k as f32, y: 300.0, w: 40.0, h: 40.0 },
+                score: 0.9,
+                feature: feat(2.0 + k as f32),
+            })
+            .collect(),
+        scene_feature: feat(0.0),
+    }
+}
+
+fn models_dir() -> PathBuf {
+    std::env::var_os("SPWI_BENCH_MODELS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/fixture"))
+}
+
+fn bench_backend(backend: Backend) {
+    let set = match ModelSet::load(&models_dir(), backend, None) {
+        Ok(s) => s,
+        Err(e) => {
+            println!("{backend:?}: skipped ({e:#})");
+            return;
+        }
+    };
+    let m = &set.manifest;
+    println!("\n== {backend:?} (model set {:?}, W = {}, H = {}, {} nodes)", m.name, m.window, m.horizon, m.max_nodes);
+    let f = frame(1, 12);
+    let mut graph = GraphBuilder::new(m.max_nodes, m.edge_weight);
+    measure("star graph (12 objects)", 20_000, || {
+        black_box(graph.build(black_box(&f)));
+    });
+    let g = graph.build(&f).unwrap().clone();
+    let mut ego = set.inference(TemporalModel::Ego).unwrap();
+    let mut col = set.inference(TemporalModel::Collective).unwrap();
+    measure("GCN", 3_000, || {
+        black_box(ego.gcn(black_box(&g)).unwrap());
+    });
+    let ego_in = vec![0.1f32; m.window * EGO_DIM];
+    let col_in = vec![0.1f32; m.window * COLLECTIVE_DIM];
+    measure("ego-GRU", 3_000, || {
+        black_box(ego.gru(black_box(&ego_in)).unwrap());
+    });
+    measure("collective-GRU", 3_000, || {
+        black_box(col.gru(black_box(&col_in)).unwrap());
+    });
+    let logits = col.gru(&col_in).unwrap();
+    let ids: Vec<RobotId> = (0..8).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect();
+    let votes: Vec<Vec<StepVote>> = (0..8).map(|_| vote::vote(&logits, 1.3)).collect();
+    measure("vote + consensus (8 robots, H+1 steps)", 20_000, || {
+        let v = vote::vote(black_box(&logits), 1.3);
+        let mut ballots: Vec<Ballot<'_>> =
+            ids.iter().zip(&votes).map(|(r, s)| Ballot { robot: r, visibility: 5, steps: s }).collect();
+        black_box((v, consensus::decide(&mut ballots, Weights { alpha: 0.5, beta: 0.5 })));
+    });
+    let mut engine = Engine::new(
+        EngineConfig {
+            robot: RobotId::new("bench").unwrap(),
+            instance: 1,
+            temporal: TemporalModel::Collective,
+            embedding_wait: Duration::from_millis(30),
+            decision_deadline: Duration::from_millis(60),
+            weights: Weights { alpha: 0.5, beta: 0.5 },
+            max_open_ticks: 64,
+        },
+        set.inference(TemporalModel::Collective).unwrap(),
+    );
+    let mut tick = 0u64;
+    let template = frame(0, 12);
+    measure("whole tick (frame → decision, alone)", 3_000, || {
+        tick += 1;
+        let mut f = template.clone(); // a 29 kB copy, as a received frame would be
+        f.tick = tick;
+        black_box(engine.handle(Input::Frame(f), Duration::from_millis(tick * 100)));
+    });
+}
+
+fn bench_codec() {
+    println!("\n== codec");
+    let f = frame(7, 12);
+    let fb = encode(&f);
+    let e = EmbeddingMsg { robot: f.robot.clone(), instance: 1, tick: 7, embedding: Some(vec![0.5; EMBEDDING_DIM]), visibility: 13 };
+    let v = VoteMsg { robot: f.robot.clone(), instance: 1, tick: 7, steps: vec![StepVote { class: 2, confidence: 0.7 }; 21], visibility: 13 };
+    let d = DecisionMsg {
+        robot: f.robot.clone(),
+        instance: 1,
+        tick: 7,
+        steps: vec![TeamStep { class: 2, score: 0.6 }; 21],
+        voters: (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect(),
+        live_members: 4,
+        decided_by: DecidedBy::AllVoted,
+    };
+    let (eb, vb, db) = (encode(&e), encode(&v), encode(&d));
+    println!("sizes: frame(12 objects) {} B, embedding {} B, vote {} B, decision {} B", fb.len(), eb.len(), vb.len(), db.len());
+    measure("encode frame (12 objects)", 5_000, || {
+        black_box(encode(black_box(&f)));
+    });
+    measure("decode frame (12 objects)", 5_000, || {
+        black_box(decode::<DetectionFrame>(black_box(&fb)).unwrap());
+    });
+    measure("encode + decode embedding", 20_000, || {
+        black_box(decode::<EmbeddingMsg>(&encode(black_box(&e))).unwrap());
+    });
+    measure("encode + decode vote", 20_000, || {
+        black_box(decode::<VoteMsg>(&encode(black_box(&v))).unwrap());
+    });
+    measure("encode + decode decision", 20_000, || {
+        black_box(decode::<DecisionMsg>(&encode(black_box(&d))).unwrap());
+    });
+}
+
+fn main() {
+    if std::env::args().any(|a| a == "--list") {
+        return; // `cargo test --benches` asks for the list; there are no named benches
+    }
+    bench_backend(Backend::Tract);
+    #[cfg(feature = "ort")]
+    bench_backend(Backend::Ort);
+    bench_codec();
+}
