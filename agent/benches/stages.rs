@@ -31,7 +31,12 @@ fn measure(name: &str, iters: usize, mut f: impl FnMut()) {
     t.sort();
     let us = |d: Duration| d.as_secs_f64() * 1e6;
     let mean = t.iter().map(|d| us(*d)).sum::<f64>() / t.len() as f64;
-    println!("{name:<34} p50 {:>9.1} µs   p99 {:>9.1} µs   mean {:>9.1} µs", us(t[t.len() / 2]), us(t[t.len() * 99 / 100]), mean);
+    println!(
+        "{name:<34} p50 {:>9.1} µs   p99 {:>9.1} µs   mean {:>9.1} µs",
+        us(t[t.len() / 2]),
+        us(t[t.len() * 99 / 100]),
+        mean
+    );
 }
 
 fn frame(tick: u64, objects: usize) -> DetectionFrame {
@@ -127,8 +132,20 @@ fn bench_codec() {
     println!("\n== codec");
     let f = frame(7, 12);
     let fb = encode(&f);
-    let e = EmbeddingMsg { robot: f.robot.clone(), instance: 1, tick: 7, embedding: Some(vec![0.5; EMBEDDING_DIM]), visibility: 13 };
-    let v = VoteMsg { robot: f.robot.clone(), instance: 1, tick: 7, steps: vec![StepVote { class: 2, confidence: 0.7 }; 21], visibility: 13 };
+    let e = EmbeddingMsg {
+        robot: f.robot.clone(),
+        instance: 1,
+        tick: 7,
+        embedding: Some(vec![0.5; EMBEDDING_DIM]),
+        visibility: 13,
+    };
+    let v = VoteMsg {
+        robot: f.robot.clone(),
+        instance: 1,
+        tick: 7,
+        steps: vec![StepVote { class: 2, confidence: 0.7 }; 21],
+        visibility: 13,
+    };
     let d = DecisionMsg {
         robot: f.robot.clone(),
         instance: 1,
@@ -139,7 +156,13 @@ fn bench_codec() {
         decided_by: DecidedBy::AllVoted,
     };
     let (eb, vb, db) = (encode(&e), encode(&v), encode(&d));
-    println!("sizes: frame(12 objects) {} B, embedding {} B, vote {} B, decision {} B", fb.len(), eb.len(), vb.len(), db.len());
+    println!(
+        "sizes: frame(12 objects) {} B, embedding {} B, vote {} B, decision {} B",
+        fb.len(),
+        eb.len(),
+        vb.len(),
+        db.len()
+    );
     measure("encode frame (12 objects)", 5_000, || {
         black_box(encode(black_box(&f)));
     });

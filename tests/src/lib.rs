@@ -28,6 +28,14 @@ macro_rules! within {
     };
 }
 
+/// Serialises the timing-sensitive tests of one test binary: cargo runs a binary's
+/// tests in parallel, and a dozen agents per test on two cores would stretch the very
+/// latencies the tests bound. Take it before the test's own timeout starts.
+pub async fn serial() -> tokio::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::OnceLock<tokio::sync::Mutex<()>> = std::sync::OnceLock::new();
+    LOCK.get_or_init(|| tokio::sync::Mutex::new(())).lock().await
+}
+
 pub fn id(s: &str) -> RobotId {
     RobotId::new(s).unwrap()
 }

@@ -23,6 +23,7 @@ async fn three_processes(hub: &Hub, collector: &Collector) -> Vec<ProcessAgent> 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_killed_agent_is_out_within_1_5_s_and_decisions_go_on() {
+    let _serial = serial().await;
     within!(60, "test", async {
         let hub = Hub::start("kill").await.unwrap();
         let collector = Collector::start(&hub).await.unwrap();
@@ -44,6 +45,7 @@ async fn a_killed_agent_is_out_within_1_5_s_and_decisions_go_on() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_frozen_agent_is_out_within_1_5_s_and_back_after_sigcont() {
+    let _serial = serial().await;
     within!(60, "test", async {
         let hub = Hub::start("freeze").await.unwrap();
         let collector = Collector::start(&hub).await.unwrap();
@@ -68,6 +70,7 @@ async fn a_frozen_agent_is_out_within_1_5_s_and_back_after_sigcont() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on() {
+    let _serial = serial().await;
     within!(60, "test", async {
         let hub = Hub::start("bad").await.unwrap();
         let models = models();
@@ -140,6 +143,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_second_daemon_with_a_taken_robot_id_is_refused() {
+    let _serial = serial().await;
     within!(60, "test", async {
         let hub = Hub::start("dup").await.unwrap();
         let models = models();

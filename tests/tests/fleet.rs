@@ -60,21 +60,25 @@ async fn decide_together(n: usize, ticks: u64) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn one_agent_decides_every_tick() {
+    let _serial = serial().await;
     within!(60, "test", decide_together(1, 30));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn three_agents_decide_every_tick_and_agree() {
+    let _serial = serial().await;
     within!(90, "test", decide_together(3, 40));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn eight_agents_decide_every_tick_and_agree() {
+    let _serial = serial().await;
     within!(120, "test", decide_together(8, 40));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_graceful_leave_and_a_join_change_the_members_and_decisions_go_on() {
+    let _serial = serial().await;
     within!(90, "test", async {
         let hub = Hub::start("churn").await.unwrap();
         let models = models();
@@ -127,6 +131,7 @@ async fn a_graceful_leave_and_a_join_change_the_members_and_decisions_go_on() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_recorded_run_replays_to_the_same_decisions_bit_for_bit() {
+    let _serial = serial().await;
     within!(60, "test", async {
         let hub = Hub::start("record").await.unwrap();
         let models = models();
