@@ -77,7 +77,8 @@ struct Own {
     /// `None` when the worker was not seen (or the GCN failed).
     embedding: Option<Vec<f32>>,
     keypoints: Option<Vec<f32>>,
-    voted: bool,
+    /// The vote step ran: the window row is in and, if the worker was seen, we voted.
+    vote_step_done: bool,
 }
 
 #[derive(Debug)]
@@ -159,7 +160,7 @@ impl Engine {
         self.open
             .values()
             .map(|t| match &t.own {
-                Some(o) if !o.voted => t.started + self.cfg.embedding_wait.min(self.cfg.decision_deadline),
+                Some(o) if !o.vote_step_done => t.started + self.cfg.embedding_wait.min(self.cfg.decision_deadline),
                 _ => t.started + self.cfg.decision_deadline,
             })
             .min()
@@ -237,7 +238,7 @@ impl Engine {
             visibility,
         }));
         let tick = self.open_tick(f.tick, now);
-        tick.own = Some(Own { arrived: now, visibility, embedding, keypoints, voted: false });
+        tick.own = Some(Own { arrived: now, visibility, embedding, keypoints, vote_step_done: false });
         self.advance(f.tick, now, out);
     }
 
@@ -288,7 +289,7 @@ impl Engine {
         let expected_peers: Vec<RobotId> = self.live.intersection(&self.active).cloned().collect();
 
         // Phase 1: our vote, once the peers' embeddings are in (or waited for long enough).
-        if tick.own.as_ref().is_some_and(|o| !o.voted) {
+        if tick.own.as_ref().is_some_and(|o| !o.vote_step_done) {
             let all_in = expected_peers.iter().all(|r| tick.embeddings.contains_key(r));
             if all_in || decision_due || now >= tick.started + self.cfg.embedding_wait {
                 if let Some(v) = self.vote(t) {
@@ -306,7 +307,7 @@ impl Engine {
             }
             return;
         };
-        if !own.voted {
+        if !own.vote_step_done {
             return;
         }
         let all_voted = expected_peers
@@ -324,7 +325,7 @@ impl Engine {
     fn vote(&mut self, t: u64) -> Option<VoteMsg> {
         let tick = self.open.get_mut(&t).expect("open");
         let own = tick.own.as_mut().expect("own frame");
-        own.voted = true;
+        own.vote_step_done = true;
         let peers_mean = temporal::mean(tick.embeddings.values().flatten().map(Vec::as_slice));
         let row = Row { own: own.embedding.clone(), peers_mean, keypoints: own.keypoints.clone() };
         let seen = own.embedding.is_some();
