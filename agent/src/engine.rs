@@ -74,7 +74,8 @@ pub enum Output {
 struct Own {
     arrived: Duration,
     visibility: u32,
-    /// `None` when the worker was not seen (or the GCN failed).
+    /// `None` when the worker was not seen (or the GCN failed). Both move into the
+    /// window at the vote step.
     embedding: Option<Vec<f32>>,
     keypoints: Option<Vec<f32>>,
     /// The vote step ran: the window row is in and, if the worker was seen, we voted.
@@ -327,8 +328,9 @@ impl Engine {
         let own = tick.own.as_mut().expect("own frame");
         own.vote_step_done = true;
         let peers_mean = temporal::mean(tick.embeddings.values().flatten().map(Vec::as_slice));
-        let row = Row { own: own.embedding.clone(), peers_mean, keypoints: own.keypoints.clone() };
         let seen = own.embedding.is_some();
+        // The row is the last use of our embedding and keypoints: move them, don't copy.
+        let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take() };
         let visibility = own.visibility;
         self.window.insert(t, row);
         if !seen {

@@ -44,6 +44,21 @@ pub struct Models {
     pub collective_gru: ModelSpec,
 }
 
+impl Models {
+    /// The manifest's names of the three models.
+    pub const NAMES: [&'static str; 3] = ["gcn", "ego_gru", "collective_gru"];
+
+    /// A model's spec by its manifest name.
+    pub fn by_name(&self, name: &str) -> Option<&ModelSpec> {
+        match name {
+            "gcn" => Some(&self.gcn),
+            "ego_gru" => Some(&self.ego_gru),
+            "collective_gru" => Some(&self.collective_gru),
+            _ => None,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Manifest {
     pub name: String,

@@ -28,12 +28,8 @@ fn check_backend(backend: Backend) {
         let set = ModelSet::load(&dir, backend, None).unwrap_or_else(|e| panic!("{}: {e:#}", dir.display()));
         let reference: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
-        for name in ["gcn", "ego_gru", "collective_gru"] {
-            let spec = match name {
-                "gcn" => &set.manifest.models.gcn,
-                "ego_gru" => &set.manifest.models.ego_gru,
-                _ => &set.manifest.models.collective_gru,
-            };
+        for name in spwi_agent::manifest::Models::NAMES {
+            let spec = set.manifest.models.by_name(name).unwrap();
             let floats = |v: &serde_json::Value| -> Vec<f32> {
                 v["data"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect()
             };

@@ -358,23 +358,26 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
             changes.push(MembersChange { at_s: elapsed.as_secs_f64(), event: "joined".into(), robot: a.0.to_string() });
             agents.push(a);
         }
-        if let Some(web) = &web {
+        // One summary per beat, shared by the page and the terminal view.
+        let second = beats.is_multiple_of(5);
+        if web.is_some() || (opts.view && second) {
             let o = observed.lock().expect("observer lock");
             let summary = summarise(&o, opts.robots, &changes, models.manifest.fixture);
-            if beats.is_multiple_of(5) {
-                series.push(SeriesPoint { accuracy: summary.accuracy.t, agreement: summary.agreement });
-                if series.len() > 300 {
-                    series.remove(0);
+            if let Some(web) = &web {
+                if second {
+                    series.push(SeriesPoint { accuracy: summary.accuracy.t, agreement: summary.agreement });
+                    if series.len() > 300 {
+                        series.remove(0);
+                    }
+                }
+                if let Some(state) = page_state(&o, &summary, opts.scenario as u8, &series) {
+                    web.publish(serde_json::to_string(&state)?);
                 }
             }
-            if let Some(state) = page_state(&o, &summary, opts.scenario as u8, &series) {
-                web.publish(serde_json::to_string(&state)?);
+            if opts.view && second {
+                let members: Vec<RobotId> = agents.iter().map(|a| a.0.clone()).collect();
+                view(&o, elapsed, &members, &summary);
             }
-        }
-        if opts.view && beats.is_multiple_of(5) {
-            let members: Vec<RobotId> = agents.iter().map(|a| a.0.clone()).collect();
-            let o = observed.lock().expect("observer lock");
-            view(&o, elapsed, &members, &summarise(&o, opts.robots, &changes, models.manifest.fixture));
         }
     }
     let _ = web_stop.send(true);

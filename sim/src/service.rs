@@ -84,11 +84,11 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
             Some((robot, alive)) = rx.recv() => {
                 if alive {
                     match slots.join(robot.clone()) {
-                        Some(s) => { world.robots[s].present = true; tracing::info!(%robot, slot = s, "robot joined"); }
+                        Some(s) => { world.set_present(s, true); tracing::info!(%robot, slot = s, "robot joined"); }
                         None => tracing::warn!(%robot, "no free robot slot in the layout: this robot gets no frames"),
                     }
                 } else if let Some(s) = slots.leave(&robot) {
-                    world.robots[s].present = false;
+                    world.set_present(s, false);
                     tracing::info!(%robot, slot = s, "robot left");
                 }
             }

@@ -47,7 +47,8 @@ impl Scenario {
 /// One robot slot of the layout.
 #[derive(Debug, Clone)]
 pub struct RobotState {
-    pub present: bool,
+    /// Whether a robot occupies the slot; changed through [`World::set_present`].
+    present: bool,
     pub pose: Pose,
     next_waypoint: usize,
     detector: DetectorState,
@@ -60,8 +61,17 @@ pub struct World {
     pub worker: Worker,
     pub robots: Vec<RobotState>,
     objects: Vec<Object>,
+    /// Obstacles (scenarios 2, 3), objects, then present robots: rebuilt when robots
+    /// move or come and go, shared by every camera of the tick.
+    occluders: Vec<Occluder>,
     appearance: Appearance,
     rng: ChaCha8Rng,
+}
+
+impl RobotState {
+    pub fn is_present(&self) -> bool {
+        self.present
+    }
 }
 
 impl World {
@@ -81,7 +91,25 @@ impl World {
                 detector: DetectorState::default(),
             })
             .collect();
-        World { layout, scenario, tick: 0, worker, robots, objects, appearance: Appearance::new(), rng }
+        let mut world = World {
+            layout,
+            scenario,
+            tick: 0,
+            worker,
+            robots,
+            objects,
+            occluders: Vec::new(),
+            appearance: Appearance::new(),
+            rng,
+        };
+        world.refresh_occluders();
+        world
+    }
+
+    /// Puts a robot into slot `slot` or takes it out.
+    pub fn set_present(&mut self, slot: usize, present: bool) {
+        self.robots[slot].present = present;
+        self.refresh_occluders();
     }
 
     fn present_positions(&self) -> Vec<P2> {
@@ -119,11 +147,13 @@ impl World {
                 let turn = (want - r.pose.heading).sin().atan2((want - r.pose.heading).cos());
                 r.pose.heading += turn.clamp(-0.3, 0.3);
             }
+            self.refresh_occluders();
         }
     }
 
-    fn occluders(&self) -> Vec<Occluder> {
-        let mut o: Vec<Occluder> = Vec::new();
+    fn refresh_occluders(&mut self) {
+        let o = &mut self.occluders;
+        o.clear();
         if self.scenario.obstacles() {
             o.extend(self.layout.obstacles.iter().map(|ob| Occluder {
                 footprint: ob.rect(),
@@ -141,18 +171,16 @@ impl World {
             circle: Some((r.pose.position, ROBOT_RADIUS)),
             height: ROBOT_HEIGHT,
         }));
-        o
     }
 
     /// The detection frame of the robot in `slot`, published as `robot`.
     pub fn observe(&mut self, slot: usize, robot: &RobotId) -> DetectionFrame {
-        let occluders = self.occluders();
         let first_object = if self.scenario.obstacles() { self.layout.obstacles.len() } else { 0 };
         let own = first_object + self.objects.len() + self.robots[..slot].iter().filter(|r| r.present).count();
         let scene = camera::Scene {
             layout: &self.layout,
             objects: &self.objects,
-            occluders: &occluders,
+            occluders: &self.occluders,
             first_object,
             worker: &self.worker,
             appearance: &self.appearance,
