@@ -89,8 +89,8 @@ fn bench_backend(backend: Backend) {
     measure("GCN", 3_000, || {
         black_box(ego.gcn(black_box(&g)).unwrap());
     });
-    let ego_in = vec![0.1f32; m.window * EGO_DIM];
-    let col_in = vec![0.1f32; m.window * COLLECTIVE_DIM];
+    let ego_in = vec![0.1f32; m.frames() * EGO_DIM];
+    let col_in = vec![0.1f32; m.frames() * COLLECTIVE_DIM];
     measure("ego-GRU", 3_000, || {
         black_box(ego.gru(black_box(&ego_in)).unwrap());
     });

@@ -17,8 +17,12 @@ use tokio::sync::watch;
 #[command(name = "spwi-agent", version)]
 pub struct Args {
     /// This robot's id ([A-Za-z0-9_-]{1,64}); unique within the fleet.
-    #[arg(long, env = "SPWI_ROBOT_ID", required_unless_present = "replay")]
+    #[arg(long, env = "SPWI_ROBOT_ID", required_unless_present_any = ["replay", "robot_id_from_hostname", "probe"])]
     pub robot_id: Option<RobotId>,
+    /// Use this host's name as the robot id (one daemon per host, e.g. a container
+    /// replica); refused if the name is not a valid id.
+    #[arg(long, env = "SPWI_ROBOT_ID_FROM_HOSTNAME", conflicts_with = "robot_id")]
+    pub robot_id_from_hostname: bool,
     /// The fleet (team) to join.
     #[arg(long, env = "SPWI_FLEET", default_value = "default")]
     pub fleet: FleetId,
@@ -45,6 +49,33 @@ pub struct Args {
     /// every output is what was recorded, bit for bit.
     #[arg(long, value_name = "FILE", conflicts_with = "record")]
     pub replay: Option<PathBuf>,
+    /// Only ask the daemon serving HTTP on ADDR whether it is healthy (GET /healthz):
+    /// exit 0 if it answers 200 within 2 s, 1 otherwise. For container health checks;
+    /// every other option is ignored.
+    #[arg(long, value_name = "ADDR")]
+    pub probe: Option<std::net::SocketAddr>,
+}
+
+/// This host's name, as the kernel has it.
+fn hostname() -> Result<String> {
+    let name = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::env::var("HOSTNAME"))
+        .context("cannot read this host's name (/proc/sys/kernel/hostname or $HOSTNAME)")?;
+    Ok(name.trim().to_owned())
+}
+
+/// GET /healthz on `addr`; true on a 200 answer within 2 s.
+pub fn probe(addr: std::net::SocketAddr) -> bool {
+    use std::io::{Read, Write};
+    let timeout = std::time::Duration::from_secs(2);
+    let Ok(mut s) = std::net::TcpStream::connect_timeout(&addr, timeout) else { return false };
+    let _ = s.set_read_timeout(Some(timeout));
+    let _ = s.set_write_timeout(Some(timeout));
+    if s.write_all(b"GET /healthz HTTP/1.1\r\nHost: spwi\r\nConnection: close\r\n\r\n").is_err() {
+        return false;
+    }
+    let mut head = [0u8; 12];
+    s.read_exact(&mut head).is_ok() && head.starts_with(b"HTTP/1.") && &head[9..12] == b"200"
 }
 
 /// Sets up `tracing`: `RUST_LOG` wins; otherwise info for spwi and only warnings and
@@ -111,7 +142,14 @@ async fn run(args: Args) -> Result<()> {
     if let Some(file) = args.replay {
         return replay(&file, &config);
     }
-    let robot = args.robot_id.context("--robot-id is required")?;
+    let robot = match args.robot_id {
+        Some(id) => id,
+        None if args.robot_id_from_hostname => {
+            let name = hostname()?;
+            RobotId::new(name.clone()).map_err(|e| anyhow::anyhow!("host name {name:?} cannot be a robot id: {e}"))?
+        }
+        None => anyhow::bail!("--robot-id is required"),
+    };
     let zenoh = crate::zenoh_config::build(args.zenoh_config.as_deref(), &args.cfg)?;
     let models = tokio::task::spawn_blocking({
         let config = config.clone();
@@ -153,6 +191,9 @@ fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {
 /// `main` of `spwi-agent`.
 pub fn main() -> ExitCode {
     let args = Args::parse();
+    if let Some(addr) = args.probe {
+        return if probe(addr) { ExitCode::SUCCESS } else { ExitCode::FAILURE };
+    }
     let rt = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(rt) => rt,
         Err(e) => {

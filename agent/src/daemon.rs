@@ -16,7 +16,7 @@ use crate::consensus::Weights;
 use crate::engine::{Engine, EngineConfig, Input, Output};
 use crate::model::ModelSet;
 use crate::record::{RecordedConfig, Recorder};
-use crate::status::{SharedStatus, Status};
+use crate::status::{RecentDecision, SharedStatus, Status};
 use anyhow::{anyhow, bail, Result};
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
@@ -147,11 +147,17 @@ pub async fn run(
     drop(tx);
 
     let publish = |t: Topic| keys::robot_topic(&fleet, &robot, t);
-    let pub_embedding =
-        session.declare_publisher(publish(Topic::Embedding)).express(true).await.map_err(|e| anyhow!(e))?;
-    let pub_vote = session.declare_publisher(publish(Topic::Vote)).express(true).await.map_err(|e| anyhow!(e))?;
-    let pub_decision =
-        session.declare_publisher(publish(Topic::Decision)).express(true).await.map_err(|e| anyhow!(e))?;
+    let publishers = Publishers {
+        embedding: session.declare_publisher(publish(Topic::Embedding)).express(true).await.map_err(|e| anyhow!(e))?,
+        vote: session.declare_publisher(publish(Topic::Vote)).express(true).await.map_err(|e| anyhow!(e))?,
+        decision: session.declare_publisher(publish(Topic::Decision)).express(true).await.map_err(|e| anyhow!(e))?,
+    };
+    let (out_tx, out_rx) = mpsc::channel::<(Topic, Vec<u8>)>(OUTGOING_QUEUE);
+    let outgoing_dropped = Arc::new(AtomicU64::new(0));
+    let publisher_thread = std::thread::Builder::new()
+        .name("spwi-publish".into())
+        .spawn(move || publishers.run(out_rx))
+        .map_err(|e| anyhow!("cannot start the publisher thread: {e}"))?;
 
     let status: SharedStatus = Arc::new(Mutex::new(Status {
         robot: robot.to_string(),
@@ -163,6 +169,7 @@ pub async fn run(
         temporal: format!("{:?}", config.tick.temporal).to_lowercase(),
         members: engine.members(),
         last_decision: None,
+        recent_decisions: Default::default(),
         duplicate_robot_id: Vec::new(),
         metrics: engine.metrics.clone(),
     }));
@@ -216,28 +223,31 @@ pub async fn run(
                 recorder = None;
             }
         }
-        let mut decided = false;
+        let mut decided = Vec::new();
         for o in outputs {
-            let r = match &o {
-                Output::Embedding(m) => pub_embedding.put(encode(m)).await,
-                Output::Vote(m) => pub_vote.put(encode(m)).await,
+            let out = match &o {
+                Output::Embedding(m) => (Topic::Embedding, encode(m)),
+                Output::Vote(m) => (Topic::Vote, encode(m)),
                 Output::Decision(m) => {
-                    decided = true;
-                    pub_decision.put(encode(m)).await
+                    decided.push(RecentDecision { tick: m.tick, class: m.steps.first().map(|s| s.class) });
+                    (Topic::Decision, encode(m))
                 }
             };
-            if let Err(e) = r {
-                bad_log.warn(|| format!("publishing failed: {e}"));
+            if out_tx.try_send(out).is_err() {
+                outgoing_dropped.fetch_add(1, Ordering::Relaxed);
+                bad_log.warn(|| "Zenoh is holding up publishing: dropping outgoing messages".to_owned());
             }
         }
-        if decided || membership_change {
+        if !decided.is_empty() || membership_change {
             let lost = overflow.swap(0, Ordering::Relaxed);
             if lost > 0 {
                 *engine.metrics.bad_messages.entry("queue_full").or_default() += lost;
             }
+            engine.metrics.outgoing_dropped += outgoing_dropped.swap(0, Ordering::Relaxed);
             if let Ok(mut s) = status.lock() {
                 s.members = engine.members();
                 s.last_decision = engine.last_decision.clone();
+                s.remember(decided);
                 s.duplicate_robot_id = engine.duplicates.iter().copied().collect();
                 s.metrics = engine.metrics.clone();
             }
@@ -250,6 +260,8 @@ pub async fn run(
             tracing::error!("finishing the recording: {e:#}");
         }
     }
+    drop(out_tx); // the publisher thread sends what is queued, then ends
+    let _ = tokio::task::spawn_blocking(move || publisher_thread.join()).await;
     drop(subscribers);
     drop(membership);
     let _ = token.undeclare().await;
@@ -258,6 +270,44 @@ pub async fn run(
         let _ = t.await;
     }
     Ok(())
+}
+
+/// Outgoing messages queued between the tick loop and the publisher task.
+const OUTGOING_QUEUE: usize = 256;
+/// A put slower than this is logged: Zenoh is holding up publishing.
+const SLOW_PUT: Duration = Duration::from_millis(100);
+
+/// This robot's publishers, driven by their own OS thread: a put that Zenoh holds up
+/// (seen when a peer's link is cut and its lease has not yet run out) blocks the thread
+/// it runs on, and must never hold a runtime worker the tick loop needs. When the
+/// thread falls behind, the loop drops and counts messages instead.
+struct Publishers {
+    embedding: zenoh::pubsub::Publisher<'static>,
+    vote: zenoh::pubsub::Publisher<'static>,
+    decision: zenoh::pubsub::Publisher<'static>,
+}
+
+impl Publishers {
+    fn run(self, mut rx: mpsc::Receiver<(Topic, Vec<u8>)>) {
+        use zenoh::Wait;
+        let mut log = RateLimitedLog::new(Duration::from_secs(5));
+        while let Some((topic, bytes)) = rx.blocking_recv() {
+            let publisher = match topic {
+                Topic::Embedding => &self.embedding,
+                Topic::Vote => &self.vote,
+                Topic::Decision => &self.decision,
+                Topic::Detections => unreachable!("agents publish no detections"),
+            };
+            let started = Instant::now();
+            if let Err(e) = publisher.put(bytes).wait() {
+                log.warn(|| format!("publishing on {} failed: {e}", topic.as_str()));
+            }
+            let took = started.elapsed();
+            if took > SLOW_PUT {
+                log.warn(|| format!("publishing on {} took {} ms", topic.as_str(), took.as_millis()));
+            }
+        }
+    }
 }
 
 fn decode_input(topic: Topic, robot: &RobotId, bytes: &[u8]) -> Result<Input, DecodeError> {

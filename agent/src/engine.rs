@@ -125,7 +125,7 @@ impl Engine {
     pub fn new(cfg: EngineConfig, inference: Inference) -> Self {
         let m = &inference.set().manifest;
         let graph = GraphBuilder::new(m.max_nodes, m.edge_weight);
-        let window = Window::new(m.window);
+        let window = Window::with_frames(m.window, m.frames());
         let temperature = inference.set().temperature(cfg.temporal);
         Engine {
             cfg,

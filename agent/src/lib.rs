@@ -18,6 +18,7 @@
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
 //! - [`daemon`]: Zenoh wiring, membership (liveliness), the event loop;
 //! - [`config`], [`zenoh_config`], [`cli`]: settings and the command line;
+//! - [`router`]: `spwi-router`, the meeting point for hosts without multicast;
 //! - [`http`], [`status`], [`metrics`]: `/healthz`, `/status`, `/metrics`.
 
 pub mod cli;
@@ -31,6 +32,7 @@ pub mod manifest;
 pub mod metrics;
 pub mod model;
 pub mod record;
+pub mod router;
 pub mod status;
 pub mod temporal;
 pub mod vote;

@@ -9,7 +9,7 @@
 //! at the first tick.
 
 use crate::graph::{EdgeWeight, NODE_FEATURE_DIM};
-use crate::temporal::{COLLECTIVE_DIM, EGO_DIM};
+use crate::temporal::{CNN1D_DIM, COLLECTIVE_DIM, EGO_DIM};
 use serde::{Deserialize, Serialize};
 use spwi_proto::{EMBEDDING_DIM, NUM_CLASSES};
 use std::path::{Path, PathBuf};
@@ -31,6 +31,19 @@ pub struct ModelSpec {
     pub temperature: Option<f32>,
 }
 
+impl ModelSpec {
+    /// The GCN interface the daemon feeds for graphs of `max_nodes` nodes.
+    pub fn gcn(max_nodes: usize) -> ModelSpec {
+        let t = |name: &str, shape: &[usize]| TensorSpec { name: name.into(), shape: shape.to_vec() };
+        ModelSpec {
+            file: "gcn.onnx".into(),
+            inputs: vec![t("x", &[1, max_nodes, NODE_FEATURE_DIM]), t("adj", &[1, max_nodes, max_nodes])],
+            outputs: vec![t("embedding", &[1, EMBEDDING_DIM]), t("logits", &[1, NUM_CLASSES])],
+            temperature: None,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ConsensusDefaults {
     pub alpha: f32,
@@ -42,10 +55,14 @@ pub struct Models {
     pub gcn: ModelSpec,
     pub ego_gru: ModelSpec,
     pub collective_gru: ModelSpec,
+    /// The paper's 1D-CNN baseline (human node feature ‖ keypoints per frame → logits),
+    /// shipped for the evaluation only: the daemon never runs it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cnn1d: Option<ModelSpec>,
 }
 
 impl Models {
-    /// The manifest's names of the three models.
+    /// The manifest's names of the models the daemon runs.
     pub const NAMES: [&'static str; 3] = ["gcn", "ego_gru", "collective_gru"];
 
     /// A model's spec by its manifest name.
@@ -54,8 +71,16 @@ impl Models {
             "gcn" => Some(&self.gcn),
             "ego_gru" => Some(&self.ego_gru),
             "collective_gru" => Some(&self.collective_gru),
+            "cnn1d" => self.cnn1d.as_ref(),
             _ => None,
         }
+    }
+
+    /// Every model the set holds, with its name.
+    pub fn all(&self) -> impl Iterator<Item = (&'static str, &ModelSpec)> {
+        [("gcn", &self.gcn), ("ego_gru", &self.ego_gru), ("collective_gru", &self.collective_gru)]
+            .into_iter()
+            .chain(self.cnn1d.as_ref().map(|s| ("cnn1d", s)))
     }
 }
 
@@ -67,7 +92,12 @@ pub struct Manifest {
     pub fixture: bool,
     pub classes: Vec<String>,
     pub max_nodes: usize,
+    /// Ticks of history the temporal models look at.
     pub window: usize,
+    /// Rows of that history fed to them, picked at uniform intervals (the paper's
+    /// temporal-resolution study); absent means every tick of the window.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<usize>,
     pub horizon: usize,
     pub edge_weight: EdgeWeight,
     pub consensus: ConsensusDefaults,
@@ -106,10 +136,15 @@ impl Manifest {
         let m: Manifest =
             serde_json::from_str(&text).map_err(|source| ManifestError::Parse { path: path.clone(), source })?;
         m.check_interface(&path)?;
-        for spec in [&m.models.gcn, &m.models.ego_gru, &m.models.collective_gru] {
+        for (_, spec) in m.models.all() {
             check_onnx(&dir.join(&spec.file), spec)?;
         }
         Ok(m)
+    }
+
+    /// Rows fed to the temporal models per window.
+    pub fn frames(&self) -> usize {
+        self.frames.unwrap_or(self.window)
     }
 
     /// The shapes the daemon will feed and read, derived from W, H and the node count.
@@ -130,13 +165,16 @@ impl Manifest {
                 spwi_proto::MAX_STEPS
             ));
         }
-        let (n, w, steps) = (self.max_nodes, self.window, self.horizon + 1);
+        if !(1..=self.window).contains(&self.frames()) {
+            return bad(format!("frames {} must be within 1..=window ({})", self.frames(), self.window));
+        }
+        let (n, w, steps) = (self.max_nodes, self.frames(), self.horizon + 1);
         let expect = |spec: &ModelSpec, what: &str, inputs: &[&[usize]], outputs: &[&[usize]]| {
             let ins: Vec<&[usize]> = spec.inputs.iter().map(|t| t.shape.as_slice()).collect();
             let outs: Vec<&[usize]> = spec.outputs.iter().map(|t| t.shape.as_slice()).collect();
             if ins != inputs || outs != outputs {
                 return bad(format!(
-                    "{what} ({}) declares inputs {ins:?} and outputs {outs:?}; with max_nodes {n}, window {w} and horizon {} the daemon feeds {inputs:?} and reads {outputs:?}",
+                    "{what} ({}) declares inputs {ins:?} and outputs {outs:?}; with max_nodes {n}, {w} frames and horizon {} the daemon feeds {inputs:?} and reads {outputs:?}",
                     spec.file, self.horizon
                 ));
             }
@@ -150,6 +188,9 @@ impl Manifest {
         )?;
         expect(&self.models.ego_gru, "ego_gru", &[&[1, w, EGO_DIM]], &[&[1, steps, NUM_CLASSES]])?;
         expect(&self.models.collective_gru, "collective_gru", &[&[1, w, COLLECTIVE_DIM]], &[&[1, steps, NUM_CLASSES]])?;
+        if let Some(cnn) = &self.models.cnn1d {
+            expect(cnn, "cnn1d", &[&[1, w, CNN1D_DIM]], &[&[1, steps, NUM_CLASSES]])?;
+        }
         for (what, spec) in [("ego_gru", &self.models.ego_gru), ("collective_gru", &self.models.collective_gru)] {
             match spec.temperature {
                 Some(t) if t.is_finite() && t > 0.0 => {}
@@ -162,7 +203,7 @@ impl Manifest {
 
 /// Compares an ONNX file's inputs (as declared) and outputs (as tract infers them
 /// from the declared inputs) with the manifest.
-fn check_onnx(file: &Path, spec: &ModelSpec) -> Result<(), ManifestError> {
+pub fn check_onnx(file: &Path, spec: &ModelSpec) -> Result<(), ManifestError> {
     let onnx_err = |e: TractError| ManifestError::Onnx { file: file.to_owned(), reason: format!("{e:#}") };
     let model = tract_onnx::onnx().model_for_path(file).map_err(onnx_err)?;
     let inputs: Vec<(String, Option<TVec<usize>>, String)> = model

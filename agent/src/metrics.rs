@@ -103,6 +103,8 @@ pub struct Metrics {
     pub evicted_ticks: u64,
     /// Model runs that failed (the tick goes on without this robot's vote).
     pub model_errors: u64,
+    /// Outgoing messages dropped because Zenoh held up the publisher task.
+    pub outgoing_dropped: u64,
     /// Peer decisions compared with ours, and how many were the same.
     pub agreement_compared: u64,
     pub agreement_same: u64,
@@ -135,7 +137,7 @@ impl Metrics {
     pub fn render(&self, robot: &str, members: usize) -> String {
         let mut o = String::new();
         let l = format!("robot=\"{robot}\"");
-        let counters: [(&str, &str, u64); 10] = [
+        let counters: [(&str, &str, u64); 11] = [
             ("spwi_frames_total", "detection frames processed", self.frames),
             ("spwi_frames_with_worker_total", "frames in which the worker was seen", self.frames_with_worker),
             ("spwi_decisions_total", "team decisions published", self.decisions),
@@ -153,6 +155,11 @@ impl Metrics {
             ),
             ("spwi_evicted_ticks_total", "open ticks dropped for lack of room", self.evicted_ticks),
             ("spwi_model_errors_total", "failed model runs", self.model_errors),
+            (
+                "spwi_outgoing_dropped_total",
+                "outgoing messages dropped while Zenoh held up publishing",
+                self.outgoing_dropped,
+            ),
             ("spwi_agreement_compared_total", "peer decisions compared with ours", self.agreement_compared),
         ];
         for (name, help, v) in counters {

@@ -4,7 +4,19 @@
 use crate::metrics::Metrics;
 use serde::Serialize;
 use spwi_proto::{DecisionMsg, RobotId};
+use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
+
+/// Decisions kept in `/status` (10 s at 10 Hz): enough to compare robots' decisions
+/// tick by tick from outside, e.g. in the container end-to-end test.
+pub const RECENT_DECISIONS: usize = 100;
+
+/// One decided tick: the team's class at t, none when no member saw the worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct RecentDecision {
+    pub tick: u64,
+    pub class: Option<u8>,
+}
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Status {
@@ -19,6 +31,8 @@ pub struct Status {
     /// Live members, this robot included.
     pub members: Vec<RobotId>,
     pub last_decision: Option<DecisionMsg>,
+    /// The latest decisions, oldest first.
+    pub recent_decisions: VecDeque<RecentDecision>,
     /// Instance ids of other live daemons that use this robot's id.
     pub duplicate_robot_id: Vec<u64>,
     pub metrics: Metrics,
@@ -26,3 +40,12 @@ pub struct Status {
 
 /// Shared between the tick loop (writer) and the HTTP server (readers).
 pub type SharedStatus = Arc<Mutex<Status>>;
+
+impl Status {
+    /// Appends new decisions, forgetting the oldest beyond [`RECENT_DECISIONS`].
+    pub fn remember(&mut self, decided: impl IntoIterator<Item = RecentDecision>) {
+        self.recent_decisions.extend(decided);
+        let excess = self.recent_decisions.len().saturating_sub(RECENT_DECISIONS);
+        self.recent_decisions.drain(..excess);
+    }
+}

@@ -15,6 +15,21 @@ pub const EGO_DIM: usize = EMBEDDING_DIM + KEYPOINT_VALUES;
 /// Width of one collective-GRU row: own ‖ mean of peers ‖ keypoints.
 pub const COLLECTIVE_DIM: usize = 2 * EMBEDDING_DIM + KEYPOINT_VALUES;
 
+/// Width of one row of the 1D-CNN baseline: the worker node's feature ‖ keypoints.
+pub const CNN1D_DIM: usize = crate::graph::NODE_FEATURE_DIM + KEYPOINT_VALUES;
+
+/// Which ticks of a `window`-tick history feed a model that reads `frames` rows:
+/// uniform intervals, first and last included (the paper's "pick the required number
+/// of frames at uniform intervals"). Offsets count from the oldest tick. Training
+/// (models/train) picks with the same formula: round(j (window-1) / (frames-1)), halves up.
+pub fn frame_offsets(window: usize, frames: usize) -> Vec<usize> {
+    assert!(frames >= 1 && frames <= window, "1 <= frames <= window");
+    if frames == 1 {
+        return vec![window - 1];
+    }
+    (0..frames).map(|j| (2 * j * (window - 1) + (frames - 1)) / (2 * (frames - 1))).collect()
+}
+
 /// Which temporal model a robot runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -64,14 +79,26 @@ pub fn mean<'a>(embeddings: impl IntoIterator<Item = &'a [f32]>) -> Option<Vec<f
 #[derive(Debug, Clone)]
 pub struct Window {
     len: usize,
+    /// Which of the `len` ticks feed the model (all of them unless the model reads fewer frames).
+    picked: Vec<usize>,
     rows: BTreeMap<u64, Row>,
 }
 
 impl Window {
-    /// `len` ≥ 1 ticks.
+    /// `len` ≥ 1 ticks, every one fed to the model.
     pub fn new(len: usize) -> Self {
+        Self::with_frames(len, len)
+    }
+
+    /// `len` ≥ 1 ticks of which `frames` (1..=len), at uniform intervals, feed the model.
+    pub fn with_frames(len: usize, frames: usize) -> Self {
         assert!(len >= 1, "a window holds at least one tick");
-        Window { len, rows: BTreeMap::new() }
+        Window { len, picked: frame_offsets(len, frames), rows: BTreeMap::new() }
+    }
+
+    /// Rows the model reads.
+    pub fn frames(&self) -> usize {
+        self.picked.len()
     }
 
     pub fn len(&self) -> usize {
@@ -91,16 +118,17 @@ impl Window {
         self.rows = self.rows.split_off(&oldest);
     }
 
-    /// The flattened `[len, row_dim]` input for the window ending at `tick`, into `out`.
+    /// The flattened `[frames, row_dim]` input for the window ending at `tick`, into
+    /// `out`. Ticks before the first (tick < len - 1) and ticks with no row are zeros.
     pub fn input(&self, tick: u64, model: TemporalModel, out: &mut Vec<f32>) {
         let dim = model.row_dim();
         out.clear();
-        out.resize(self.len * dim, 0.0);
-        let first = tick.saturating_sub(self.len as u64 - 1);
-        let offset = (self.len as u64 - 1 - (tick - first)) as usize; // left-pad early ticks
-        for (t, row) in self.rows.range(first..=tick) {
-            let at = (offset + (t - first) as usize) * dim;
-            let slot = &mut out[at..at + dim];
+        out.resize(self.picked.len() * dim, 0.0);
+        let oldest = tick as i64 - (self.len as i64 - 1); // may be negative: left padding
+        for (j, &k) in self.picked.iter().enumerate() {
+            let t = oldest + k as i64;
+            let Some(row) = u64::try_from(t).ok().and_then(|t| self.rows.get(&t)) else { continue };
+            let slot = &mut out[j * dim..(j + 1) * dim];
             if let Some(e) = &row.own {
                 slot[..EMBEDDING_DIM].copy_from_slice(e);
             }
@@ -172,6 +200,23 @@ mod tests {
             w.insert(t, row(t as f32));
         }
         assert_eq!(w.rows.len(), 4);
+    }
+
+    #[test]
+    fn fewer_frames_are_picked_at_uniform_intervals() {
+        assert_eq!(frame_offsets(10, 10), (0..10).collect::<Vec<_>>());
+        assert_eq!(frame_offsets(10, 5), vec![0, 2, 5, 7, 9]);
+        assert_eq!(frame_offsets(10, 3), vec![0, 5, 9]);
+        assert_eq!(frame_offsets(20, 1), vec![19]);
+        let mut w = Window::with_frames(10, 3);
+        for t in 0..30 {
+            w.insert(t, row(t as f32));
+        }
+        let mut out = Vec::new();
+        w.input(29, TemporalModel::Ego, &mut out);
+        assert_eq!(out.len(), 3 * EGO_DIM);
+        let firsts: Vec<f32> = (0..3).map(|j| out[j * EGO_DIM]).collect();
+        assert_eq!(firsts, vec![20.0, 25.0, 29.0]);
     }
 
     #[test]

@@ -28,8 +28,7 @@ fn check_backend(backend: Backend) {
         let set = ModelSet::load(&dir, backend, None).unwrap_or_else(|e| panic!("{}: {e:#}", dir.display()));
         let reference: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
-        for name in spwi_agent::manifest::Models::NAMES {
-            let spec = set.manifest.models.by_name(name).unwrap();
+        for (name, spec) in set.manifest.models.all() {
             let floats = |v: &serde_json::Value| -> Vec<f32> {
                 v["data"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect()
             };

@@ -93,12 +93,19 @@ enum Command {
         /// Keep the graph of every Nth tick per robot for the spatial part.
         #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
         spatial_every: u32,
-        /// A model set whose GCN computes the temporal part's embeddings (via the agent's code).
-        #[arg(long, value_name = "MODEL_SET")]
+        /// The GCN that computes the temporal part's embeddings (via the agent's code):
+        /// a model set folder, or a lone gcn .onnx file.
+        #[arg(long, value_name = "MODEL_SET_OR_ONNX")]
         gcn: Option<PathBuf>,
-        /// Graph size when no --gcn is given (with --gcn: the manifest's).
+        /// Graph size, unless --gcn names a model set (then: its manifest's).
         #[arg(long, default_value_t = 16)]
         max_nodes: usize,
+        /// Edge weights, unless --gcn names a model set (then: its manifest's).
+        #[arg(long, default_value = "proximity", value_parser = parse_edge_weight)]
+        edge_weight: spwi_agent::graph::EdgeWeight,
+        /// Also write the worker node's 1024-d feature per row (the 1D-CNN baseline's input).
+        #[arg(long)]
+        human_features: bool,
         #[arg(long)]
         layout: Option<PathBuf>,
     },
@@ -209,7 +216,20 @@ fn run(args: Args) -> Result<()> {
             }
             Ok(())
         }
-        Command::Dataset { scenario, episodes, robots, ticks, seed, out, spatial_every, gcn, max_nodes, layout: l } => {
+        Command::Dataset {
+            scenario,
+            episodes,
+            robots,
+            ticks,
+            seed,
+            out,
+            spatial_every,
+            gcn,
+            max_nodes,
+            edge_weight,
+            human_features,
+            layout: l,
+        } => {
             let l = layout(l)?;
             if robots == 0 || robots > l.robots.len() {
                 anyhow::bail!("--robots {robots}: the layout has slots for 1..={} robots", l.robots.len());
@@ -217,12 +237,12 @@ fn run(args: Args) -> Result<()> {
             if episodes == 0 || ticks == 0 {
                 anyhow::bail!("--episodes and --ticks must be at least 1");
             }
-            let gcn = gcn
-                .map(|dir| spwi_agent::model::ModelSet::load(&dir, spwi_agent::model::Backend::Tract, None))
-                .transpose()?;
-            let (max_nodes, edge_weight) = match &gcn {
-                Some(m) => (m.manifest.max_nodes, m.manifest.edge_weight),
-                None => (max_nodes, spwi_agent::graph::EdgeWeight::Proximity),
+            let (gcn, max_nodes, edge_weight) = match gcn {
+                Some(dir) if dir.is_dir() => {
+                    let m = spwi_agent::manifest::Manifest::load(&dir)?;
+                    (Some(dir.join(&m.models.gcn.file)), m.max_nodes, m.edge_weight)
+                }
+                file => (file, max_nodes, edge_weight),
             };
             if !(1..=256).contains(&max_nodes) {
                 anyhow::bail!("--max-nodes {max_nodes}: must be within 1..=256");
@@ -240,6 +260,7 @@ fn run(args: Args) -> Result<()> {
                 max_nodes,
                 edge_weight,
                 gcn,
+                human_features,
             })?;
             println!(
                 "wrote {} ({samples} graph samples, {rows} temporal rows) in {:.1} s",
@@ -298,4 +319,9 @@ pub fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+fn parse_edge_weight(s: &str) -> Result<spwi_agent::graph::EdgeWeight, String> {
+    serde_json::from_value(serde_json::Value::String(s.to_owned()))
+        .map_err(|_| format!("unknown edge weight {s:?}; use \"proximity\" or \"distance\""))
 }

@@ -10,8 +10,10 @@
 //! - `temporal/`: one row per (episode, tick, robot), ordered so the arrays reshape to
 //!   `[episodes, ticks, robots, …]`: keypoints, visibility, whether the worker is seen,
 //!   the truth now and for the next 30 ticks, the worker's phase; and, given a trained
-//!   GCN (`--gcn MODEL_SET`), its embedding and logits computed by the agent's own
-//!   inference code — so training and serving cannot drift apart.
+//!   GCN (`--gcn MODEL_SET_OR_ONNX`), its embedding and logits computed by the agent's
+//!   own inference code — so training and serving cannot drift apart. With
+//!   `--human-features`, also the worker node's 1024-d feature (the 1D-CNN baseline's
+//!   input; 4 KB a row, so only when asked).
 //!
 //! Episodes are split 60/20/20 (train/validation/test) by episode index, as in the paper.
 //! `dataset.json` describes every array.
@@ -22,11 +24,10 @@ use crate::world::{Scenario, World};
 use anyhow::{Context, Result};
 use serde_json::json;
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
-use spwi_agent::model::ModelSet;
-use spwi_agent::temporal::{normalise_keypoints, TemporalModel};
+use spwi_agent::model::{Backend, Gcn};
+use spwi_agent::temporal::normalise_keypoints;
 use spwi_proto::{RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::Instant;
 
 /// Future ticks of truth stored with every row.
@@ -44,7 +45,10 @@ pub struct DatasetOptions {
     /// Graph size and edge weights; from the GCN's manifest when given.
     pub max_nodes: usize,
     pub edge_weight: spwi_agent::graph::EdgeWeight,
-    pub gcn: Option<Arc<ModelSet>>,
+    /// The GCN file whose embeddings fill the temporal part, if any.
+    pub gcn: Option<PathBuf>,
+    /// Also write the worker node's feature per row (temporal/human_feature.npy).
+    pub human_features: bool,
 }
 
 /// 0 train, 1 validation, 2 test: 60/20/20 by episode index.
@@ -95,6 +99,7 @@ struct Temporal {
     tick: NpyWriter<u32>,
     embedding: Option<NpyWriter<f32>>,
     gcn_logits: Option<NpyWriter<f32>>,
+    human_feature: Option<NpyWriter<f32>>,
 }
 
 /// One robot's row of one tick, held until the future truth is known.
@@ -104,6 +109,7 @@ struct Pending {
     visibility: u32,
     embedding: Vec<f32>,
     logits: [f32; NUM_CLASSES],
+    human_feature: Vec<f32>,
 }
 
 /// Writes the dataset; returns (spatial samples, temporal rows).
@@ -136,8 +142,12 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         tick: NpyWriter::create(&f(&td, "tick"), &[])?,
         embedding: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "embedding"), &[EMBEDDING_DIM])).transpose()?,
         gcn_logits: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "gcn_logits"), &[NUM_CLASSES])).transpose()?,
+        human_feature: o
+            .human_features
+            .then(|| NpyWriter::create(&f(&td, "human_feature"), &[NODE_FEATURE_DIM]))
+            .transpose()?,
     };
-    let mut inference = o.gcn.as_ref().map(|m| m.inference(TemporalModel::Ego)).transpose()?;
+    let mut gcn = o.gcn.as_ref().map(|file| Gcn::load(file, n, Backend::Tract, None)).transpose()?;
     let mut graph = GraphBuilder::new(n, o.edge_weight);
     let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("r{i}"))).collect::<Result<_, _>>()?;
     let started = Instant::now();
@@ -169,6 +179,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                     visibility: frame.visibility(),
                     embedding: vec![0.0; EMBEDDING_DIM],
                     logits: [0.0; NUM_CLASSES],
+                    human_feature: Vec::new(),
                 };
                 if let Some(g) = graph.build(&frame) {
                     if t % o.spatial_every == 0 {
@@ -182,10 +193,13 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                         sp.robot.push(&[slot as u8])?;
                         sp.tick.push(&[t])?;
                     }
-                    if let Some(inf) = inference.as_mut() {
-                        let out = inf.gcn(g)?;
+                    if let Some(gcn) = gcn.as_mut() {
+                        let out = gcn.run(g)?;
                         row.embedding = out.embedding;
                         row.logits = out.logits;
+                    }
+                    if o.human_features {
+                        row.human_feature = g.x[..NODE_FEATURE_DIM].to_vec(); // node 0 is the worker
                     }
                 }
                 tick_rows.push(row);
@@ -207,6 +221,13 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 if let (Some(em), Some(lg)) = (tp.embedding.as_mut(), tp.gcn_logits.as_mut()) {
                     em.push(&r.embedding)?;
                     lg.push(&r.logits)?;
+                }
+                if let Some(hf) = tp.human_feature.as_mut() {
+                    if r.human_feature.is_empty() {
+                        hf.push(&[0.0; NODE_FEATURE_DIM])?;
+                    } else {
+                        hf.push(&r.human_feature)?;
+                    }
                 }
             }
         }
@@ -235,9 +256,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     for w in [tp.visibility, tp.episode, tp.tick] {
         w.finish()?;
     }
-    if let (Some(em), Some(lg)) = (tp.embedding, tp.gcn_logits) {
-        em.finish()?;
-        lg.finish()?;
+    for w in [tp.embedding, tp.gcn_logits, tp.human_feature].into_iter().flatten() {
+        w.finish()?;
     }
     let description = json!({
         "scenario": o.scenario as u8,
@@ -250,7 +270,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         "classes": spwi_proto::STATION_NAMES,
         "max_nodes": n,
         "edge_weight": o.edge_weight,
-        "gcn": o.gcn.as_ref().map(|m| json!({"model_set": m.manifest.name, "dir": m.dir})),
+        "gcn": o.gcn.as_ref().map(|file| json!({"file": file})),
         "spatial": {
             "samples": samples,
             "sampling": format!("every {}th tick of each robot, when it sees the worker", o.spatial_every),
@@ -280,6 +300,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 "tick": ["uint32", ["rows"], "tick within the episode"],
                 "embedding": ["float32", ["rows", EMBEDDING_DIM], "GCN embedding of the worker node (only with --gcn; zeros when not seen)"],
                 "gcn_logits": ["float32", ["rows", NUM_CLASSES], "GCN logits (only with --gcn; zeros when not seen)"],
+                "human_feature": ["float32", ["rows", NODE_FEATURE_DIM], "the worker node's feature, global ‖ local (only with --human-features; zeros when not seen)"],
             }
         }
     });
@@ -291,7 +312,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
 mod tests {
     use super::*;
 
-    fn export_to(dir: &Path, gcn: Option<Arc<ModelSet>>) -> (u64, u64) {
+    fn export_to(dir: &Path, gcn: Option<PathBuf>) -> (u64, u64) {
         let _ = std::fs::remove_dir_all(dir);
         export(&DatasetOptions {
             scenario: Scenario::Dynamic,
@@ -305,6 +326,7 @@ mod tests {
             max_nodes: 16,
             edge_weight: spwi_agent::graph::EdgeWeight::Proximity,
             gcn,
+            human_features: true,
         })
         .unwrap()
     }
@@ -321,12 +343,7 @@ mod tests {
     #[test]
     fn export_sizes_match_the_description_and_the_same_seed_gives_the_same_bytes() {
         let base = std::env::temp_dir().join(format!("spwi-dataset-{}", std::process::id()));
-        let gcn = ModelSet::load(
-            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture"),
-            spwi_agent::model::Backend::Tract,
-            None,
-        )
-        .unwrap();
+        let gcn = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture/gcn.onnx");
         let (samples, rows) = export_to(&base.join("a"), Some(gcn.clone()));
         assert_eq!(rows, 5 * 40 * 2);
         assert!(samples > 0 && samples <= 5 * 20 * 2);
@@ -341,6 +358,7 @@ mod tests {
         assert_eq!(data("temporal/truth.npy"), rows * 31);
         assert_eq!(data("temporal/embedding.npy"), rows * 128 * 4);
         assert_eq!(data("temporal/tick.npy"), rows * 4);
+        assert_eq!(data("temporal/human_feature.npy"), rows * 1024 * 4);
         let described: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(base.join("a/dataset.json")).unwrap()).unwrap();
         assert_eq!(described["temporal"]["rows"], rows);

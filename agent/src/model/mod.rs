@@ -57,7 +57,7 @@ pub trait Runner: Send {
     fn run(&mut self, inputs: &[Input<'_>]) -> Result<Vec<Vec<f32>>>;
 }
 
-/// The three models of a model set, checked against its manifest.
+/// The models of a model set, checked against its manifest.
 pub struct ModelSet {
     pub manifest: Manifest,
     pub dir: PathBuf,
@@ -65,6 +65,20 @@ pub struct ModelSet {
     gcn: Box<dyn LoadedModel>,
     ego_gru: Box<dyn LoadedModel>,
     collective_gru: Box<dyn LoadedModel>,
+    cnn1d: Option<Box<dyn LoadedModel>>,
+}
+
+fn load_file(path: &Path, backend: Backend, ort_library: Option<&Path>) -> Result<Box<dyn LoadedModel>> {
+    match backend {
+        Backend::Tract => Ok(Box::new(tract::TractModel::load(path)?)),
+        #[cfg(feature = "ort")]
+        Backend::Ort => Ok(Box::new(ort::OrtModel::load(path, ort_library)?)),
+        #[cfg(not(feature = "ort"))]
+        Backend::Ort => {
+            let _ = ort_library;
+            bail!("backend \"ort\" was asked for, but this build has no ONNX Runtime support (rebuild with `--features ort`)")
+        }
+    }
 }
 
 impl std::fmt::Debug for ModelSet {
@@ -78,23 +92,12 @@ impl ModelSet {
     /// path of `libonnxruntime.so` (ort backend only).
     pub fn load(dir: &Path, backend: Backend, ort_library: Option<&Path>) -> Result<Arc<ModelSet>> {
         let manifest = Manifest::load(dir)?;
-        let load = |spec: &ModelSpec| -> Result<Box<dyn LoadedModel>> {
-            let path = dir.join(&spec.file);
-            match backend {
-                Backend::Tract => Ok(Box::new(tract::TractModel::load(&path)?)),
-                #[cfg(feature = "ort")]
-                Backend::Ort => Ok(Box::new(ort::OrtModel::load(&path, ort_library)?)),
-                #[cfg(not(feature = "ort"))]
-                Backend::Ort => {
-                    let _ = ort_library;
-                    bail!("backend \"ort\" was asked for, but this build has no ONNX Runtime support (rebuild with `--features ort`)")
-                }
-            }
-        };
+        let load = |spec: &ModelSpec| load_file(&dir.join(&spec.file), backend, ort_library);
         let set = ModelSet {
             gcn: load(&manifest.models.gcn)?,
             ego_gru: load(&manifest.models.ego_gru)?,
             collective_gru: load(&manifest.models.collective_gru)?,
+            cnn1d: manifest.models.cnn1d.as_ref().map(load).transpose()?,
             manifest,
             dir: dir.to_owned(),
             backend,
@@ -108,7 +111,7 @@ impl ModelSet {
             TemporalModel::Ego => &self.ego_gru,
             TemporalModel::Collective => &self.collective_gru,
         };
-        Ok(Inference { set: Arc::clone(self), gcn: self.gcn.runner()?, gru: gru.runner()?, temporal })
+        Ok(Inference { set: Arc::clone(self), gcn: Gcn { runner: self.gcn.runner()? }, gru: gru.runner()?, temporal })
     }
 
     /// The GRU's softmax temperature T for `temporal`.
@@ -126,7 +129,11 @@ impl ModelSet {
             "gcn" => self.gcn.runner(),
             "ego_gru" => self.ego_gru.runner(),
             "collective_gru" => self.collective_gru.runner(),
-            _ => bail!("no model named {name:?} (gcn, ego_gru, collective_gru)"),
+            "cnn1d" => match &self.cnn1d {
+                Some(m) => m.runner(),
+                None => bail!("model set {:?} ships no cnn1d baseline", self.manifest.name),
+            },
+            _ => bail!("no model named {name:?} (gcn, ego_gru, collective_gru, cnn1d)"),
         }
     }
 }
@@ -138,22 +145,23 @@ pub struct GcnOutput {
     pub logits: [f32; NUM_CLASSES],
 }
 
-/// One robot's model runners.
-pub struct Inference {
-    set: Arc<ModelSet>,
-    gcn: Box<dyn Runner>,
-    gru: Box<dyn Runner>,
-    pub temporal: TemporalModel,
+/// A GCN runner on its own: what the dataset export needs before any GRU is trained.
+pub struct Gcn {
+    runner: Box<dyn Runner>,
 }
 
-impl Inference {
-    pub fn set(&self) -> &Arc<ModelSet> {
-        &self.set
+impl Gcn {
+    /// Loads a lone GCN file, checked against the interface the daemon feeds for
+    /// graphs of `max_nodes` nodes.
+    pub fn load(file: &Path, max_nodes: usize, backend: Backend, ort_library: Option<&Path>) -> Result<Gcn> {
+        crate::manifest::check_onnx(file, &ModelSpec::gcn(max_nodes))?;
+        Ok(Gcn { runner: load_file(file, backend, ort_library)?.runner()? })
     }
 
-    pub fn gcn(&mut self, g: &StarGraph) -> Result<GcnOutput> {
+    /// The worker node's embedding and the spatial-only logits.
+    pub fn run(&mut self, g: &StarGraph) -> Result<GcnOutput> {
         let n = g.max_nodes;
-        let out = self.gcn.run(&[
+        let out = self.runner.run(&[
             Input { shape: &[1, n, crate::graph::NODE_FEATURE_DIM], data: &g.x },
             Input { shape: &[1, n, n], data: &g.adj },
         ])?;
@@ -167,12 +175,30 @@ impl Inference {
         }
         Ok(GcnOutput { embedding, logits: logits.try_into().expect("length checked") })
     }
+}
 
-    /// Logits for t and each forecast step, from a `[W, row_dim]` window.
+/// One robot's model runners.
+pub struct Inference {
+    set: Arc<ModelSet>,
+    gcn: Gcn,
+    gru: Box<dyn Runner>,
+    pub temporal: TemporalModel,
+}
+
+impl Inference {
+    pub fn set(&self) -> &Arc<ModelSet> {
+        &self.set
+    }
+
+    pub fn gcn(&mut self, g: &StarGraph) -> Result<GcnOutput> {
+        self.gcn.run(g)
+    }
+
+    /// Logits for t and each forecast step, from a `[frames, row_dim]` window.
     pub fn gru(&mut self, window: &[f32]) -> Result<Vec<[f32; NUM_CLASSES]>> {
         let m = &self.set.manifest;
         let dim = self.temporal.row_dim();
-        let out = self.gru.run(&[Input { shape: &[1, m.window, dim], data: window }])?;
+        let out = self.gru.run(&[Input { shape: &[1, m.frames(), dim], data: window }])?;
         let logits = out.into_iter().next().context("gru gave no output")?;
         if logits.len() != (m.horizon + 1) * NUM_CLASSES || logits.iter().any(|v| !v.is_finite()) {
             bail!("gru gave {} values (want {}) or a non-finite one", logits.len(), (m.horizon + 1) * NUM_CLASSES);

@@ -1,0 +1,66 @@
+//! `spwi-router`: a Zenoh router for hosts that cannot scout each other by multicast
+//! (containers on a Docker network, robots on networks that drop multicast).
+//!
+//! Every daemon connects to it and learns the others' addresses from its gossip, then
+//! talks to them directly (peer mode): the router is only a meeting point. If it goes
+//! down, the robots already connected keep their links and keep deciding; robots that
+//! start while it is down find no one until it is back. It is Zenoh's own router mode
+//! (what `zenohd` runs, without plugins), so no extra program has to be installed.
+
+use crate::cli::{init_tracing, spawn_signal_handler};
+use crate::config::LogFormat;
+use anyhow::{anyhow, Result};
+use clap::Parser;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use tokio::sync::watch;
+
+/// A Zenoh router for spwi fleets whose hosts cannot scout each other by multicast.
+#[derive(Debug, Parser)]
+#[command(name = "spwi-router", version)]
+pub struct Args {
+    /// Where to listen (Zenoh endpoint).
+    #[arg(long, default_value = "tcp/0.0.0.0:7447")]
+    pub listen: String,
+    /// Zenoh's own config file (json5), as zenohd takes it.
+    #[arg(long, env = "ZENOH_CONFIG")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Zenoh setting override KEY:VALUE (VALUE in json5), repeatable.
+    #[arg(long = "cfg", value_name = "KEY:VALUE")]
+    pub cfg: Vec<String>,
+}
+
+async fn run(args: Args) -> Result<()> {
+    let mut overrides =
+        vec![r#"mode:"router""#.to_owned(), format!("listen/endpoints:{}", serde_json::to_string(&[&args.listen])?)];
+    overrides.extend(args.cfg);
+    let config = crate::zenoh_config::build(args.zenoh_config.as_deref(), &overrides)?;
+    let session = zenoh::open(config).await.map_err(|e| anyhow!("cannot start the Zenoh router: {e}"))?;
+    tracing::info!(listen = %args.listen, zid = %session.zid(), "router up");
+    let (tx, mut rx) = watch::channel(false);
+    spawn_signal_handler(tx);
+    let _ = rx.wait_for(|stop| *stop).await;
+    session.close().await.map_err(|e| anyhow!("closing the router session: {e}"))?;
+    tracing::info!("router stopped");
+    Ok(())
+}
+
+/// `main` of `spwi-router`.
+pub fn main() -> ExitCode {
+    let args = Args::parse();
+    init_tracing(LogFormat::Human);
+    let rt = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("spwi-router: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match rt.block_on(run(args)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("spwi-router: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# From the simulated factory to the shipped ONNX model sets, with no manual step:
+#
+#   1. spwi-sim dataset (scenarios 1-3): the spatial graphs;
+#   2. train_gcn.py: the GCN, exported to ONNX;
+#   3. spwi-sim dataset --gcn gcn.onnx: the temporal rows, with the embeddings the
+#      agent's own Rust code computes from that exported GCN;
+#   4. train_temporal.py per model set: ego-GRU, collective-GRU (and the 1D-CNN baseline
+#      for the default set), temperature scaling, export, checks, manifest.
+#
+# Usage: models/train.sh            (all sets; ~40 min on 2 cores, see models/README.md)
+#        SETS="default" models/train.sh
+# Settings (environment): EPISODES per scenario (300), SEED (1), SPWI_TRAIN_VENV,
+# SPWI_TRAIN_DATA (where the exports go, ~5 GB), CARGO_TARGET_DIR.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+EPISODES="${EPISODES:-300}"
+SEED="${SEED:-1}"
+SETS="${SETS:-default w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
+VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
+DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/spwi/target}"
+step() { printf '\n=== %s (%s)\n' "$*" "$(date +%T)"; }
+started=$SECONDS
+
+step "training venv (PyTorch CPU, onnx, onnxruntime)"
+[ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"
+"$VENV/bin/pip" install --quiet --disable-pip-version-check -r models/train/requirements.txt
+PY="$VENV/bin/python"
+
+step "spwi-sim (release)"
+cargo build --release --quiet -p spwi-sim
+SIM="$CARGO_TARGET_DIR/release/spwi-sim"
+
+# Training seeds: scenario s of seed N exports with seed 10 N + s. The evaluation
+# (spwi-sim eval) uses other seeds and checks that no episode seed overlaps.
+export_all() { # $1: part name, then extra dataset flags
+  local part="$1"; shift
+  local pids=()
+  for s in 1 2 3; do
+    "$SIM" dataset --scenario "$s" --episodes "$EPISODES" --robots 4 --ticks 300 \
+      --seed $((SEED * 10 + s)) --out "$DATA/$part-s$s" "$@" > "$DATA/$part-s$s.log" 2>&1 &
+    pids+=($!)
+    if [ "${#pids[@]}" -ge 2 ]; then wait "${pids[0]}"; pids=("${pids[@]:1}"); fi
+  done
+  for p in "${pids[@]}"; do wait "$p"; done
+  tail -n 1 "$DATA"/"$part"-s*.log
+}
+
+rm -rf "$DATA"; mkdir -p "$DATA"
+step "stage 1 data: spatial graphs, $EPISODES episodes x 3 scenarios x 4 robots"
+export_all spatial --spatial-every 5
+
+step "stage 1: GCN"
+(cd models/train && "$PY" train_gcn.py --data "$DATA"/spatial-s{1,2,3} --out "$DATA/gcn" --seed "$SEED")
+rm -rf "$DATA"/spatial-s*  # the graphs are not needed again
+
+step "stage 2 data: temporal rows through the exported GCN (agent's Rust code)"
+export_all temporal --gcn "$DATA/gcn/gcn.onnx" --human-features --spatial-every 1000000
+
+step "stage 2: temporal models"
+for set in $SETS; do
+  case "$set" in
+    default)    args=(--window 20 --horizon 20 --cnn1d) ;;
+    w10-h10)    args=(--window 10 --horizon 10) ;;
+    w30-h30)    args=(--window 30 --horizon 30) ;;
+    w10-h10-f5) args=(--window 10 --horizon 10 --frames 5) ;;
+    w10-h10-f3) args=(--window 10 --horizon 10 --frames 3) ;;
+    *) echo "unknown model set $set" >&2; exit 2 ;;
+  esac
+  (cd models/train && "$PY" train_temporal.py --data "$DATA"/temporal-s{1,2,3} --gcn-dir "$DATA/gcn" \
+    --out "../$set" --seed "$SEED" "${args[@]}")
+done
+
+step "summary"
+"$PY" models/train/report.py models/default $(for s in $SETS; do [ "$s" = default ] || echo "models/$s"; done)
+echo "total $((SECONDS - started)) s"

@@ -1,0 +1,122 @@
+"""Reads what `spwi-sim dataset` exports and turns it into training batches.
+
+The export is one .npy per array plus dataset.json (see sim/src/dataset.rs). The
+temporal arrays are ordered episode-major, then tick, then robot, so they reshape to
+[episodes, ticks, robots, ...]. Batches are built here exactly as the daemon builds its
+window (agent/src/temporal.rs): the W ticks ending at t, left-padded with zeros before
+the first tick, a row of zeros where a part is missing (worker not seen, no peer saw
+it), and `frames` of the W rows picked at uniform intervals by the same formula.
+"""
+import json
+import os
+
+import numpy as np
+import torch
+
+CLASSES = 4
+EMBEDDING = 128
+KEYPOINTS = 34
+FEATURE = 1024
+SPLITS = {"train": 0, "validation": 1, "test": 2}
+
+
+def frame_offsets(window, frames):
+    """Offsets (from the oldest tick) of the rows a model reading `frames` of a
+    `window`-tick history sees: round(j (window-1) / (frames-1)), halves up."""
+    assert 1 <= frames <= window
+    if frames == 1:
+        return [window - 1]
+    return [(2 * j * (window - 1) + (frames - 1)) // (2 * (frames - 1)) for j in range(frames)]
+
+
+class Export:
+    """One `spwi-sim dataset` folder."""
+
+    def __init__(self, path):
+        self.path = path
+        with open(os.path.join(path, "dataset.json")) as f:
+            self.desc = json.load(f)
+        self.scenario = self.desc["scenario"]
+        self.episodes = self.desc["episodes"]
+        self.ticks = self.desc["ticks_per_episode"]
+        self.robots = self.desc["robots"]
+
+    def has(self, part, name):
+        return os.path.exists(os.path.join(self.path, part, f"{name}.npy"))
+
+    def spatial(self, name):
+        return np.load(os.path.join(self.path, "spatial", f"{name}.npy"), mmap_mode="r")
+
+    def temporal(self, name):
+        """[episodes, ticks, robots, ...], loaded into memory."""
+        a = np.load(os.path.join(self.path, "temporal", f"{name}.npy"))
+        return a.reshape(self.episodes, self.ticks, self.robots, *a.shape[1:])
+
+
+class Sequences:
+    """Every (episode, tick, robot) of one export as tensors, and the windows that
+    end at the ticks where the robot sees the worker (the only ticks it votes)."""
+
+    def __init__(self, ex, need_features=False):
+        self.scenario = ex.scenario
+        self.robots = ex.robots
+        self.seen = torch.from_numpy(ex.temporal("seen").astype(np.bool_))
+        self.emb = torch.from_numpy(ex.temporal("embedding"))
+        self.gcn_logits = torch.from_numpy(ex.temporal("gcn_logits"))
+        self.keypoints = torch.from_numpy(ex.temporal("keypoints"))
+        self.truth = torch.from_numpy(ex.temporal("truth").astype(np.int64))
+        self.visibility = torch.from_numpy(ex.temporal("visibility").astype(np.float32))
+        self.feature = torch.from_numpy(ex.temporal("human_feature")) if need_features else None
+        self.split = ex.temporal("split")[:, 0, 0]
+        self.seed = ex.desc["seed"]
+
+    def ends(self, split, every=1, rng=None):
+        """(episode, tick, robot) index tensors of the windows to use in `split`."""
+        episodes = np.flatnonzero(self.split == SPLITS[split])
+        seen = self.seen[episodes].numpy()
+        e, t, r = np.nonzero(seen)
+        keep = (t % every) == (rng.integers(every) if rng is not None else 0)
+        return (torch.from_numpy(episodes[e[keep]]), torch.from_numpy(t[keep]), torch.from_numpy(r[keep]))
+
+
+def gather(seqs, e, t, r, window, frames):
+    """Tick indices [B, F] of each window, clipped, and which are real (not padding)."""
+    off = torch.tensor(frame_offsets(window, frames))
+    tt = t[:, None] - (window - 1) + off[None, :]
+    valid = tt >= 0
+    return tt.clamp(min=0), valid
+
+
+def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1):
+    """Inputs [B, F, D] and labels [B, H+1] for `kind` in ego, collective, cnn1d.
+
+    Collective peers: at evaluation (peer_rng None) every other robot of the episode;
+    in training a random subset of 0..R-1 of them (0 with a small probability, so the
+    model also works alone), each missing on a tick with probability `peer_drop`.
+    """
+    tt, valid = gather(seqs, e, t, r, window, frames)
+    E, R = e[:, None], r[:, None]
+    v = valid[..., None].float()
+    kp = seqs.keypoints[E, tt, R] * v
+    labels = seqs.truth[e, t, r, : horizon + 1]
+    if kind == "ego":
+        return torch.cat([seqs.emb[E, tt, R] * v, kp], -1), labels
+    if kind == "cnn1d":
+        return torch.cat([seqs.feature[E, tt, R] * v, kp], -1), labels
+    assert kind == "collective"
+    all_emb = seqs.emb[E, tt]  # [B, F, R, 128]
+    present = seqs.seen[E, tt].float() * v  # [B, F, R]
+    others = torch.ones(len(e), seqs.robots)
+    others[torch.arange(len(e)), r] = 0
+    if peer_rng is not None:
+        # choose how many peers each sample keeps (0 rarely), then which
+        k = torch.from_numpy(peer_rng.integers(1, seqs.robots, len(e)))
+        k[torch.from_numpy(peer_rng.random(len(e)) < 0.05)] = 0
+        order = torch.from_numpy(peer_rng.random((len(e), seqs.robots))).float() + (1 - others) * 2
+        rank = order.argsort(1).argsort(1)
+        others = others * (rank < k[:, None]).float()
+        drop = torch.from_numpy(peer_rng.random(present.shape) < peer_drop).float()
+        present = present * (1 - drop)
+    w = present * others[:, None, :]
+    mean = (w[..., None] * all_emb).sum(2) / w.sum(2, keepdim=True).clamp(min=1)
+    return torch.cat([seqs.emb[E, tt, R] * v, mean, kp], -1), labels

@@ -1,0 +1,223 @@
+#!/usr/bin/env python3
+"""The container fleet end to end (driven by tests/compose-e2e.sh, which builds the image).
+
+Starts deploy/compose.yaml (router, world, 4 agents) as its own compose project and
+checks, through each agent's /status (read from the host over the Docker network):
+
+1. all 4 agents are healthy, count 4 members and decide the same class tick by tick;
+2. `docker kill` one agent: the other 3 count 3 within 1.5 s and keep deciding;
+3. `--scale agent=6`: the newcomers (and the killed one, restarted) are counted and vote;
+4. `docker network disconnect` one agent: the others drop it within 1.5 s; after
+   `docker network connect` it is counted again;
+5. the router stops: the connected agents keep deciding, all still counted.
+
+Prints each measured time. Tears the project down at the end, even on failure.
+Only the Python standard library and the docker CLI are needed.
+"""
+import json
+import os
+import subprocess
+import sys
+import time
+import urllib.request
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PROJECT = os.environ.get("SPWI_E2E_PROJECT", f"spwi-e2e-{os.getpid()}")
+# Docker's compose plugin where installed, else Debian's docker-compose (1.29).
+_plugin = subprocess.run(["docker", "compose", "version"], capture_output=True).returncode == 0
+COMPOSE = (["docker", "compose"] if _plugin else ["docker-compose"]) + [
+    "-p",
+    PROJECT,
+    "-f",
+    os.path.join(ROOT, "deploy", "compose.yaml"),
+]
+NETWORK = f"{PROJECT}_fleet"
+KILL_BUDGET_S = 1.5
+figures = {}
+
+
+def sh(*args, check=True):
+    r = subprocess.run(args, capture_output=True, text=True)
+    if check and r.returncode != 0:
+        raise RuntimeError(f"{' '.join(args)} failed ({r.returncode}): {r.stderr.strip()}")
+    return r.stdout.strip()
+
+
+def compose(*args):
+    return sh(*COMPOSE, *args)
+
+
+def agents():
+    """Running agent containers: id -> (robot id = host name, IP on the fleet network)."""
+    out = {}
+    for cid in compose("ps", "-q", "agent").split():
+        info = json.loads(sh("docker", "inspect", cid))[0]
+        if not info["State"]["Running"]:
+            continue
+        net = info["NetworkSettings"]["Networks"].get(NETWORK)
+        out[cid] = (info["Config"]["Hostname"], net["IPAddress"] if net else None)
+    return out
+
+
+def status(ip):
+    try:
+        with urllib.request.urlopen(f"http://{ip}:9000/status", timeout=0.5) as r:
+            return json.load(r)
+    except (OSError, ValueError):
+        return None
+
+
+def fail(msg):
+    raise AssertionError(msg)
+
+
+def wait_until(what, cond, timeout, poll=0.05):
+    """Polls cond() until it returns a truthy value; returns (value, seconds taken)."""
+    start = time.monotonic()
+    while True:
+        v = cond()
+        if v:
+            return v, time.monotonic() - start
+        if time.monotonic() - start > timeout:
+            fail(f"timed out after {timeout} s waiting for: {what}")
+        time.sleep(poll)
+
+
+def all_count(ips, n):
+    """True when every agent at `ips` answers and counts exactly n members."""
+    def cond():
+        sts = [status(ip) for ip in ips]
+        return all(s is not None and len(s["members"]) == n for s in sts) and sts
+    return cond
+
+
+def agreement(ips, seconds=3.0):
+    """Share of ticks, decided by every agent, on which all decided the same class."""
+    time.sleep(seconds)
+    recents = [status(ip) for ip in ips]
+    if any(r is None for r in recents):
+        fail("an agent stopped answering /status")
+    by_tick = [{d["tick"]: d["class"] for d in r["recent_decisions"]} for r in recents]
+    common = set.intersection(*(set(b) for b in by_tick))
+    if len(common) < 10:
+        fail(f"only {len(common)} ticks decided by all {len(ips)} agents in the last 10 s")
+    same = sum(1 for t in common if len({b[t] for b in by_tick}) == 1)
+    return same / len(common), len(common)
+
+
+def keeps_deciding(ips, members):
+    """Every agent's latest decided tick advances and counts `members` live members."""
+    before = [status(ip)["last_decision"]["tick"] for ip in ips]
+    time.sleep(1.0)
+    after = [status(ip) for ip in ips]
+    for b, a in zip(before, after):
+        d = a["last_decision"]
+        if d["tick"] < b + 5:
+            fail(f"{a['robot']} decided only up to tick {d['tick']} one second after {b}")
+        if d["live_members"] != members:
+            fail(f"{a['robot']} decided with {d['live_members']} live members, expected {members}")
+    return after
+
+
+def main():
+    print(f"compose project {PROJECT}")
+    compose("up", "-d", "--scale", "agent=4")
+
+    # 1. four agents, healthy, same decisions
+    ag = agents()
+    ips = [ip for _, ip in ag.values()]
+    wait_until("4 agents counting 4 members", all_count(ips, 4), 60)
+    wait_until(
+        "every agent healthy (image health check on /healthz)",
+        lambda: all(sh("docker", "inspect", "-f", "{{.State.Health.Status}}", c) == "healthy" for c in ag),
+        30,
+    )
+    wait_until("decisions from every agent", lambda: all(status(ip)["last_decision"] for ip in ips), 10)
+    share, ticks = agreement(ips)
+    print(f"4 agents: same decision on {share:.1%} of {ticks} common ticks")
+    if share < 0.95:
+        fail(f"agents agree on only {share:.1%} of ticks")
+    figures["agreement_4"] = round(share, 4)
+
+    # 2. kill one
+    victim = next(iter(ag))
+    rest = [ip for c, (_, ip) in ag.items() if c != victim]
+    sh("docker", "kill", victim)
+    _, took = wait_until("the other 3 counting 3 members after docker kill", all_count(rest, 3), 10, poll=0.02)
+    print(f"docker kill: the other 3 count 3 members after {took * 1000:.0f} ms")
+    if took > KILL_BUDGET_S:
+        fail(f"kill detected after {took:.2f} s > {KILL_BUDGET_S} s")
+    figures["kill_detect_ms"] = round(took * 1000)
+    keeps_deciding(rest, 3)
+
+    # 3. scale to 6: the killed container restarts (same host name, same robot id) and two are new
+    before = set(ag)
+    started = time.monotonic()
+    compose("up", "-d", "--no-recreate", "--scale", "agent=6")
+    ag = agents()
+    if len(ag) != 6:
+        fail(f"{len(ag)} agent containers running after --scale agent=6")
+    ips = [ip for _, ip in ag.values()]
+    wait_until("6 agents counting 6 members", all_count(ips, 6), 60, poll=0.1)
+    took = time.monotonic() - started
+    print(f"scale 4 -> 6: every agent counts 6 members {took:.1f} s after `compose up` (container start included)")
+    figures["scale_to_6_s"] = round(took, 1)
+    # A robot votes on the ticks it sees the worker: every newcomer that has seen it
+    # must be among the voters of the team's decisions.
+    newcomers = {robot for c, (robot, _) in ag.items() if c not in before}
+    voted = set()
+
+    def newcomers_voted():
+        sts = [status(ip) for ip in ips]
+        for s in sts:
+            voted.update((s or {}).get("last_decision", {}).get("voters", []) if s and s["last_decision"] else [])
+        seen = {s["robot"] for s in sts if s and s["robot"] in newcomers and s["metrics"]["frames_with_worker"] > 0}
+        return seen and seen <= voted and seen
+
+    seen, took = wait_until("every newcomer that saw the worker among the voters", newcomers_voted, 60, poll=0.1)
+    print(f"newcomers {sorted(newcomers)}: {sorted(seen)} saw the worker and were counted as voters")
+    keeps_deciding(ips, 6)
+    share, ticks = agreement(ips)
+    print(f"6 agents: same decision on {share:.1%} of {ticks} common ticks")
+    if share < 0.95:
+        fail(f"agents agree on only {share:.1%} of ticks")
+
+    # 4. cut one off the network, then plug it back
+    cut, (cut_robot, _) = next(iter(ag.items()))
+    rest = [ip for c, (_, ip) in ag.items() if c != cut]
+    sh("docker", "network", "disconnect", NETWORK, cut)
+    _, took = wait_until("the other 5 counting 5 after network disconnect", all_count(rest, 5), 10, poll=0.02)
+    print(f"network disconnect: the other 5 drop {cut_robot} after {took * 1000:.0f} ms")
+    if took > KILL_BUDGET_S + 0.5:
+        fail(f"disconnect detected after {took:.2f} s")
+    figures["disconnect_detect_ms"] = round(took * 1000)
+    keeps_deciding(rest, 5)
+    sh("docker", "network", "connect", NETWORK, cut)
+    _, took = wait_until("the cut agent counted again after reconnect", all_count(rest, 6), 60, poll=0.1)
+    print(f"network reconnect: {cut_robot} counted again after {took:.1f} s")
+    figures["reconnect_s"] = round(took, 1)
+
+    # 5. the router goes down: the mesh stays
+    ips = [ip for _, ip in agents().values()]
+    wait_until("all 6 counting 6 before stopping the router", all_count(ips, 6), 30, poll=0.1)
+    compose("stop", "--timeout", "1", "router")
+    time.sleep(2.0)
+    keeps_deciding(ips, 6)
+    share, ticks = agreement(ips, seconds=2.0)
+    print(f"router stopped: all 6 still decide, same decision on {share:.1%} of {ticks} common ticks")
+    figures["agreement_without_router"] = round(share, 4)
+    print("figures: " + json.dumps(figures))
+
+
+if __name__ == "__main__":
+    try:
+        main()
+        print("compose end-to-end: PASS")
+    except Exception as e:  # noqa: BLE001 - report, tear down, fail
+        print(f"compose end-to-end: FAIL: {e}", file=sys.stderr)
+        for svc in ("router", "world", "agent"):
+            logs = subprocess.run([*COMPOSE, "logs", "--tail", "15", svc], capture_output=True, text=True).stdout
+            print(f"--- last logs of {svc}:\n{logs}", file=sys.stderr)
+        sys.exit(1)
+    finally:
+        subprocess.run([*COMPOSE, "down", "--timeout", "1", "--remove-orphans"], capture_output=True)
