@@ -11,7 +11,9 @@
 # Usage: models/train.sh            (all sets; ~40 min on 2 cores, see models/README.md)
 #        SETS="default" models/train.sh
 # Settings (environment): EPISODES per scenario (300), SEED (1), SPWI_TRAIN_VENV,
-# SPWI_TRAIN_DATA (where the exports go, ~5 GB), CARGO_TARGET_DIR.
+# SPWI_TRAIN_DATA (where the exports go, ~5 GB), MODELS_OUT (where the sets go:
+# models/), STAGE2_ONLY=1 (reuse the GCN and temporal exports already in
+# SPWI_TRAIN_DATA), CARGO_TARGET_DIR.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -20,6 +22,7 @@ SEED="${SEED:-1}"
 SETS="${SETS:-default w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
 VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
 DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
+OUT="$(realpath -m "${MODELS_OUT:-models}")"
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/spwi/target}"
 step() { printf '\n=== %s (%s)\n' "$*" "$(date +%T)"; }
 started=$SECONDS
@@ -48,16 +51,18 @@ export_all() { # $1: part name, then extra dataset flags
   tail -n 1 "$DATA"/"$part"-s*.log
 }
 
-rm -rf "$DATA"; mkdir -p "$DATA"
-step "stage 1 data: spatial graphs, $EPISODES episodes x 3 scenarios x 4 robots"
-export_all spatial --spatial-every 5
+if [ -z "${STAGE2_ONLY:-}" ]; then
+  rm -rf "$DATA"; mkdir -p "$DATA"
+  step "stage 1 data: spatial graphs, $EPISODES episodes x 3 scenarios x 4 robots"
+  export_all spatial --spatial-every 5
 
-step "stage 1: GCN"
-(cd models/train && "$PY" train_gcn.py --data "$DATA"/spatial-s{1,2,3} --out "$DATA/gcn" --seed "$SEED")
-rm -rf "$DATA"/spatial-s*  # the graphs are not needed again
+  step "stage 1: GCN"
+  (cd models/train && "$PY" train_gcn.py --data "$DATA"/spatial-s{1,2,3} --out "$DATA/gcn" --seed "$SEED")
+  rm -rf "$DATA"/spatial-s*  # the graphs are not needed again
 
-step "stage 2 data: temporal rows through the exported GCN (agent's Rust code)"
-export_all temporal --gcn "$DATA/gcn/gcn.onnx" --human-features --spatial-every 1000000
+  step "stage 2 data: temporal rows through the exported GCN (agent's Rust code)"
+  export_all temporal --gcn "$DATA/gcn/gcn.onnx" --human-features --spatial-every 1000000
+fi
 
 step "stage 2: temporal models"
 for set in $SETS; do
@@ -70,9 +75,9 @@ for set in $SETS; do
     *) echo "unknown model set $set" >&2; exit 2 ;;
   esac
   (cd models/train && "$PY" train_temporal.py --data "$DATA"/temporal-s{1,2,3} --gcn-dir "$DATA/gcn" \
-    --out "../$set" --seed "$SEED" "${args[@]}")
+    --out "$OUT/$set" --seed "$SEED" "${args[@]}")
 done
 
 step "summary"
-"$PY" models/train/report.py models/default $(for s in $SETS; do [ "$s" = default ] || echo "models/$s"; done)
+"$PY" models/train/report.py $(for s in $SETS; do echo "$OUT/$s"; done)
 echo "total $((SECONDS - started)) s"

@@ -4,7 +4,7 @@
 //!
 //! Run: `cargo bench -p spwi-agent --bench stages` (add `--features ort` and set
 //! ORT_DYLIB_PATH to include ONNX Runtime). `SPWI_BENCH_MODELS=DIR` picks a model set
-//! (default: models/fixture, which has the trained models' shapes).
+//! (default: models/default, the shipped trained set).
 
 use spwi_agent::consensus::{self, Ballot, Weights};
 use spwi_agent::engine::{Engine, EngineConfig, Input};
@@ -65,7 +65,7 @@ fn frame(tick: u64, objects: usize) -> DetectionFrame {
 fn models_dir() -> PathBuf {
     std::env::var_os("SPWI_BENCH_MODELS")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/fixture"))
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/default"))
 }
 
 fn bench_backend(backend: Backend) {

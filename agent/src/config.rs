@@ -87,7 +87,7 @@ impl Default for TickConfig {
 
 impl Default for ModelsConfig {
     fn default() -> Self {
-        ModelsConfig { dir: PathBuf::from("models/fixture"), backend: Backend::Tract, ort_library: None }
+        ModelsConfig { dir: PathBuf::from("models/default"), backend: Backend::Tract, ort_library: None }
     }
 }
 

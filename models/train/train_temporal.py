@@ -92,7 +92,7 @@ def train(kind, all_seqs, a, rng):
     for epoch in range(a.epochs):
         model.train()
         started = time.time()
-        steps = a.samples // batch_size
+        steps = (a.samples // 2 if kind == "cnn1d" else a.samples) // batch_size
         # each batch from one export, chosen in proportion to its size
         which = rng.choice(len(all_seqs), size=steps, p=sizes / sizes.sum())
         for k in which:

@@ -1,4 +1,4 @@
-//! The `spwi-sim` command line: `world`, `demo`, `stats`.
+//! The `spwi-sim` command line: `world`, `demo`, `dataset`, `eval`, `render`, `stats`.
 
 use crate::layout::Layout;
 use crate::world::Scenario;
@@ -108,6 +108,73 @@ enum Command {
         human_features: bool,
         #[arg(long)]
         layout: Option<PathBuf>,
+    },
+    /// Reproduce the paper's tables on held-out episodes with the agent's own pipeline.
+    Eval {
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=8))]
+        robots: u64,
+        /// Ticks of history (selects the model set, with --horizon and --frames).
+        #[arg(long, default_value_t = 20)]
+        window: usize,
+        #[arg(long, default_value_t = 20)]
+        horizon: usize,
+        /// Frames of the window fed to the models (default: all).
+        #[arg(long)]
+        frames: Option<usize>,
+        /// A model set folder (instead of choosing by --window/--horizon/--frames).
+        #[arg(long)]
+        models: Option<PathBuf>,
+        #[arg(long)]
+        layout: Option<PathBuf>,
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..))]
+        episodes: u32,
+        /// Evaluation seed; episodes the models were trained on are refused.
+        #[arg(long, default_value_t = crate::eval::DEFAULT_SEED)]
+        seed: u64,
+        /// Ticks per episode (10 per second).
+        #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u32).range(1..))]
+        ticks: u32,
+        /// Robots (highest slots) that leave half-way through each episode.
+        #[arg(long, default_value_t = 0)]
+        dropouts: usize,
+        /// Probability that a message between robots is lost (0-1).
+        #[arg(long, default_value_t = 0.0)]
+        loss: f64,
+        /// Robots (lowest slots) whose camera is stuck on a frame showing the worker.
+        #[arg(long, default_value_t = 0)]
+        faulty: usize,
+        /// Write every figure as JSON to this file.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Every study (tables II-IV, robots, horizons, resolution, faults, an unseen
+        /// layout); with --markdown FILE also writes the results page.
+        #[arg(long)]
+        all: bool,
+        #[arg(long, requires = "all")]
+        markdown: Option<PathBuf>,
+    },
+    /// Measure a fleet: the world here, N spwi-agent processes over Zenoh on loopback.
+    Bench {
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=64))]
+        robots: u64,
+        /// How long to measure, after 2 s of warm-up (e.g. 20s).
+        #[arg(long, default_value = "20s", value_parser = crate::demo::parse_duration)]
+        duration: Duration,
+        /// Publish the next tick as soon as every robot decided (the maximum rate).
+        #[arg(long)]
+        free: bool,
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+        scenario: u8,
+        /// The spwi-agent binary (default: next to this one).
+        #[arg(long)]
+        agent: Option<PathBuf>,
+        /// Model set folder for the agents (default: theirs).
+        #[arg(long)]
+        models: Option<PathBuf>,
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
     /// Draw the floor and every robot's detections at one tick into a PNG.
     Render {
@@ -267,6 +334,109 @@ fn run(args: Args) -> Result<()> {
                 out.display(),
                 started.elapsed().as_secs_f64()
             );
+            Ok(())
+        }
+        Command::Eval {
+            scenario,
+            robots,
+            window,
+            horizon,
+            frames,
+            models,
+            layout: l,
+            episodes,
+            seed,
+            ticks,
+            dropouts,
+            loss,
+            faulty,
+            json,
+            all,
+            markdown,
+        } => {
+            let layout_name = l.as_ref().map_or("factory.toml (built in)".to_owned(), |p| p.display().to_string());
+            let l = layout(l)?;
+            let robots = robots as usize;
+            if !(0.0..=1.0).contains(&loss) {
+                anyhow::bail!("--loss {loss}: a probability, 0 to 1");
+            }
+            if dropouts >= robots || faulty > robots {
+                anyhow::bail!(
+                    "--dropouts {dropouts} / --faulty {faulty}: must leave at least one of the {robots} robots working"
+                );
+            }
+            let root = std::path::Path::new("models");
+            if all {
+                let unseen = std::path::Path::new("sim/layouts/factory-moved.toml");
+                let settings = crate::eval::studies::Settings {
+                    models_root: root.to_owned(),
+                    layout: l,
+                    layout_name,
+                    unseen_layout: if unseen.is_file() {
+                        Some((Layout::load(unseen)?, unseen.display().to_string()))
+                    } else {
+                        None
+                    },
+                    episodes,
+                    seed,
+                    ticks,
+                };
+                let studies = crate::eval::studies::run_all(&settings)?;
+                if let Some(path) = json {
+                    std::fs::write(&path, serde_json::to_string_pretty(&studies)?)?;
+                }
+                if let Some(path) = markdown {
+                    let command = format!(
+                        "spwi-sim eval --all --episodes {episodes} --seed {seed} --markdown {}",
+                        path.display()
+                    );
+                    std::fs::write(&path, crate::eval::studies::markdown(&studies, &command, &settings))?;
+                    println!("wrote {}", path.display());
+                }
+                return Ok(());
+            }
+            let dir = match models {
+                Some(d) => d,
+                None => crate::eval::find_model_set(root, window, horizon, frames)?,
+            };
+            let models = spwi_agent::model::ModelSet::load(&dir, spwi_agent::model::Backend::Tract, None)?;
+            let report = crate::eval::run(&crate::eval::EvalOptions {
+                scenario: Scenario::from_number(scenario)?,
+                robots,
+                models,
+                layout: l,
+                layout_name,
+                episodes,
+                seed,
+                ticks,
+                faults: crate::eval::Faults { dropouts, loss, faulty },
+            })?;
+            crate::eval::print(&report);
+            if let Some(path) = json {
+                std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+            }
+            Ok(())
+        }
+        Command::Bench { robots, duration, free, scenario, agent, models, json } => {
+            init_tracing(LogFormat::Human);
+            let agent = match agent {
+                Some(a) => a,
+                None => std::env::current_exe()?.with_file_name("spwi-agent"),
+            };
+            let opts = crate::bench::BenchOptions {
+                robots: robots as usize,
+                duration,
+                free_running: free,
+                scenario: Scenario::from_number(scenario)?,
+                agent,
+                models,
+            };
+            let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+            let report = rt.block_on(crate::bench::run(&opts))?;
+            crate::bench::print(&report);
+            if let Some(path) = json {
+                std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+            }
             Ok(())
         }
         Command::Render { scenario, seed, tick, robots, out, layout: l } => {

@@ -10,19 +10,23 @@
 //! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
 //! cli.rs        the `spwi-sim` command line
 //! dataset.rs    `spwi-sim dataset`: training data (.npy), graphs built by the agent's code
+//! eval/         `spwi-sim eval`: the paper's tables on held-out episodes, the agent's code
 //! npy.rs        a streaming .npy writer
 //! render.rs     `spwi-sim render`: a top-down PNG and each camera's detections
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
+//! bench.rs      `spwi-sim bench`: N agent processes over Zenoh; latency, CPU, memory
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
 //! ```
 
 pub mod appearance;
+pub mod bench;
 pub mod camera;
 pub mod cli;
 pub mod dataset;
 pub mod demo;
 pub mod demo_web;
+pub mod eval;
 pub mod geometry;
 pub mod layout;
 pub mod npy;

@@ -13,7 +13,7 @@ use spwi_proto::RobotPose;
 use std::collections::VecDeque;
 
 /// Height of the nose keypoint of the simulated worker (skeleton.rs), metres.
-const HEAD_HEIGHT: f32 = 1.62;
+pub const HEAD_HEIGHT: f32 = 1.62;
 /// States averaged for the velocity.
 const VELOCITY_STATES: usize = 12;
 /// Below this speed (m/s) the worker is taken to be standing.
@@ -65,10 +65,8 @@ impl Axis {
         let y = z - self.x[0];
         self.x = [self.x[0] + k[0] * y, self.x[1] + k[1] * y];
         let p = self.p;
-        self.p = [
-            [(1.0 - k[0]) * p[0][0], (1.0 - k[0]) * p[0][1]],
-            [p[1][0] - k[1] * p[0][0], p[1][1] - k[1] * p[0][1]],
-        ];
+        self.p =
+            [[(1.0 - k[0]) * p[0][0], (1.0 - k[0]) * p[0][1]], [p[1][0] - k[1] * p[0][0], p[1][1] - k[1] * p[0][1]]];
     }
 }
 
