@@ -106,8 +106,9 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
             continue;
         }
         if o.faults.dropouts > 0 && t == ticks as u64 / 2 {
-            for slot in n.saturating_sub(o.faults.dropouts)..n {
-                live[slot] = false;
+            let first_leaver = n.saturating_sub(o.faults.dropouts);
+            for (slot, alive) in live.iter_mut().enumerate().skip(first_leaver) {
+                *alive = false;
                 world.set_present(slot, false);
             }
         }
