@@ -174,8 +174,8 @@ impl Manifest {
             let outs: Vec<&[usize]> = spec.outputs.iter().map(|t| t.shape.as_slice()).collect();
             if ins != inputs || outs != outputs {
                 return bad(format!(
-                    "{what} ({}) declares inputs {ins:?} and outputs {outs:?}; with max_nodes {n}, {w} frames and horizon {} the daemon feeds {inputs:?} and reads {outputs:?}",
-                    spec.file, self.horizon
+                    "{what} ({}) declares inputs {ins:?} and outputs {outs:?}; with max_nodes {n}, window {} ({w} frames) and horizon {} the daemon feeds {inputs:?} and reads {outputs:?}",
+                    spec.file, self.window, self.horizon
                 ));
             }
             Ok(())
