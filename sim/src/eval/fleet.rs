@@ -21,6 +21,9 @@ pub struct Tallies {
     pub ego: Tally,
     pub collective: Tally,
     pub consensus: Tally,
+    /// The team decision on every tick, a tick without one (nobody saw the worker)
+    /// counting as wrong: what the fleet as a whole gets right.
+    pub team_all_ticks: Tally,
     pub cvm: Tally,
     pub cnn1d: Tally,
     /// Per robot slot: gnn, ego, collective.
@@ -31,6 +34,8 @@ pub struct Tallies {
     /// robot decided the same class for t.
     pub decided_ticks: u64,
     pub agreed_ticks: u64,
+    /// Ticks evaluated.
+    pub ticks: u64,
     /// Robot frames processed.
     pub frames: u64,
 }
@@ -42,6 +47,7 @@ impl Tallies {
             (&mut self.ego, &o.ego),
             (&mut self.collective, &o.collective),
             (&mut self.consensus, &o.consensus),
+            (&mut self.team_all_ticks, &o.team_all_ticks),
             (&mut self.cvm, &o.cvm),
             (&mut self.cnn1d, &o.cnn1d),
         ] {
@@ -66,6 +72,7 @@ impl Tallies {
         }
         self.decided_ticks += o.decided_ticks;
         self.agreed_ticks += o.agreed_ticks;
+        self.ticks += o.ticks;
         self.frames += o.frames;
     }
 }
@@ -186,6 +193,11 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
             if let Some(c) = &p.cvm {
                 tallies.cvm.add(c, truth);
             }
+        }
+        tallies.ticks += 1;
+        for d in &rec.decisions {
+            let undecided = vec![u8::MAX; horizon + 1]; // matches no class
+            tallies.team_all_ticks.add(if d.is_empty() { &undecided } else { d }, truth);
         }
         let decided: Vec<&Vec<u8>> = rec.decisions.iter().filter(|d| !d.is_empty()).collect();
         if !decided.is_empty() {

@@ -78,11 +78,16 @@ pub struct Report {
     pub model_set: String,
     pub layout: String,
     pub faults: Faults,
-    /// gnn (t only), ego, collective, consensus (collective votes + consensus), cvm, cnn1d.
+    /// gnn (t only), ego, collective, consensus (collective votes + consensus, on the
+    /// ticks some robot decided), team_all_ticks (the same decision over every tick, no
+    /// decision counting as wrong), cvm, cnn1d. Each model is scored on the ticks where
+    /// it predicts: a robot's models when it sees the worker.
     pub models: BTreeMap<&'static str, Accuracy>,
     pub per_robot: Vec<PerRobot>,
     /// Share of decided ticks on which every live robot decided the same class for t.
     pub agreement: f64,
+    /// Share of ticks on which the team had a decision (some robot saw the worker).
+    pub coverage: f64,
     /// Rows: true class; columns: predicted class (at t).
     pub confusion: BTreeMap<&'static str, Confusion>,
     /// Predictions at t scored for the collective GRU (robot-ticks seeing the worker).
@@ -135,6 +140,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     models.insert("ego", all.ego.accuracy());
     models.insert("collective", all.collective.accuracy());
     models.insert("consensus", all.consensus.accuracy());
+    models.insert("team_all_ticks", all.team_all_ticks.accuracy());
     models.insert("cvm", all.cvm.accuracy());
     if m.models.cnn1d.is_some() {
         models.insert("cnn1d", all.cnn1d.accuracy());
@@ -165,6 +171,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         models,
         per_robot,
         agreement: if all.decided_ticks == 0 { 0.0 } else { all.agreed_ticks as f64 / all.decided_ticks as f64 },
+        coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
         confusion: BTreeMap::from([("ego", all.confusion_ego), ("collective", all.confusion_collective)]),
         samples: all.collective.samples(),
         seconds,
@@ -222,7 +229,7 @@ pub fn print(r: &Report) {
         );
     }
     println!("  {:<12} {:>7} {:>10}", "model", "at t %", "t+1..H %");
-    for name in ["gnn", "ego", "collective", "consensus", "cvm", "cnn1d"] {
+    for name in ["gnn", "ego", "collective", "consensus", "team_all_ticks", "cvm", "cnn1d"] {
         if let Some(a) = r.models.get(name) {
             println!("  {:<12} {:>7} {:>10}", name, pct(a.t), a.future.map(pct).unwrap_or_else(|| "–".into()));
         }
@@ -239,8 +246,9 @@ pub fn print(r: &Report) {
         );
     }
     println!(
-        "  agreement {:.1}% · {} scored predictions · {:.1} s ({:.0} µs per robot frame)",
+        "  agreement {:.1}% · coverage {:.1}% · {} scored predictions · {:.1} s ({:.0} µs per robot frame)",
         100.0 * r.agreement,
+        100.0 * r.coverage,
         r.samples,
         r.seconds,
         r.per_frame_us
