@@ -194,17 +194,23 @@ pub fn main() -> ExitCode {
     if let Some(addr) = args.probe {
         return if probe(addr) { ExitCode::SUCCESS } else { ExitCode::FAILURE };
     }
+    run_main("spwi-agent", run(args))
+}
+
+/// Runs a program's async part on a multi-threaded runtime; an error is printed as
+/// `<program>: error: …` and gives a failing exit code.
+pub fn run_main(program: &str, fut: impl std::future::Future<Output = Result<()>>) -> ExitCode {
     let rt = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
         Ok(rt) => rt,
         Err(e) => {
-            eprintln!("spwi-agent: cannot start the async runtime: {e}");
+            eprintln!("{program}: cannot start the async runtime: {e}");
             return ExitCode::FAILURE;
         }
     };
-    match rt.block_on(run(args)) {
+    match rt.block_on(fut) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("spwi-agent: error: {e:#}");
+            eprintln!("{program}: error: {e:#}");
             ExitCode::FAILURE
         }
     }

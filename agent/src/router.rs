@@ -49,18 +49,5 @@ async fn run(args: Args) -> Result<()> {
 pub fn main() -> ExitCode {
     let args = Args::parse();
     init_tracing(LogFormat::Human);
-    let rt = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
-        Ok(rt) => rt,
-        Err(e) => {
-            eprintln!("spwi-router: cannot start the async runtime: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    match rt.block_on(run(args)) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("spwi-router: error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    crate::cli::run_main("spwi-router", run(args))
 }

@@ -259,7 +259,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     for w in [tp.embedding, tp.gcn_logits, tp.human_feature].into_iter().flatten() {
         w.finish()?;
     }
-    let description = json!({
+    let mut description = json!({
         "scenario": o.scenario as u8,
         "episodes": o.episodes,
         "robots": o.robots,
@@ -304,6 +304,16 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             }
         }
     });
+    // Describe only the arrays this export wrote.
+    let optional =
+        [("embedding", o.gcn.is_some()), ("gcn_logits", o.gcn.is_some()), ("human_feature", o.human_features)];
+    if let Some(arrays) = description["temporal"]["arrays"].as_object_mut() {
+        for (name, written) in optional {
+            if !written {
+                arrays.remove(name);
+            }
+        }
+    }
     std::fs::write(o.out.join("dataset.json"), serde_json::to_string_pretty(&description)?)?;
     Ok((samples, rows))
 }
@@ -329,6 +339,18 @@ mod tests {
             human_features: true,
         })
         .unwrap()
+    }
+
+    #[test]
+    fn the_description_lists_only_the_arrays_written() {
+        let dir = std::env::temp_dir().join(format!("spwi-dataset-plain-{}", std::process::id()));
+        export_to(&dir, None);
+        let d: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("dataset.json")).unwrap()).unwrap();
+        let arrays = d["temporal"]["arrays"].as_object().unwrap();
+        assert!(!arrays.contains_key("embedding") && !arrays.contains_key("gcn_logits"));
+        assert!(arrays.contains_key("human_feature") && dir.join("temporal/human_feature.npy").is_file());
+        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
