@@ -5,7 +5,7 @@
 
 use super::robot::{Predictions, RobotPipeline};
 use super::score::{confuse, Confusion, Tally};
-use super::{EvalOptions, Faults};
+use super::EvalOptions;
 use crate::world::World;
 use anyhow::Result;
 use rand::{Rng, SeedableRng};
@@ -227,11 +227,5 @@ fn stuck_camera(stuck: &mut Option<DetectionFrame>, frame: DetectionFrame) -> De
             }
             frame
         }
-    }
-}
-
-impl Faults {
-    pub fn none() -> Faults {
-        Faults::default()
     }
 }

@@ -43,6 +43,13 @@ pub struct Faults {
     pub faulty: usize,
 }
 
+impl Faults {
+    /// A fleet where nothing goes wrong.
+    pub fn none() -> Faults {
+        Faults::default()
+    }
+}
+
 pub struct EvalOptions {
     pub scenario: Scenario,
     pub robots: usize,
