@@ -2,7 +2,7 @@
 
 use crate::layout::Layout;
 use crate::world::Scenario;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use spwi_agent::cli::{init_tracing, spawn_signal_handler};
 use spwi_agent::config::LogFormat;
@@ -154,6 +154,10 @@ enum Command {
         all: bool,
         #[arg(long, requires = "all")]
         markdown: Option<PathBuf>,
+        /// Write PNG figures into this folder (with --all: robots, horizons, resolution
+        /// and confusion matrices; alone: the confusion matrices).
+        #[arg(long, value_name = "DIR")]
+        plots: Option<PathBuf>,
     },
     /// Measure a fleet: the world here, N spwi-agent processes over Zenoh on loopback.
     Bench {
@@ -353,6 +357,7 @@ fn run(args: Args) -> Result<()> {
             json,
             all,
             markdown,
+            plots,
         } => {
             let layout_name = l.as_ref().map_or("factory.toml (built in)".to_owned(), |p| p.display().to_string());
             let l = layout(l)?;
@@ -385,12 +390,24 @@ fn run(args: Args) -> Result<()> {
                 if let Some(path) = json {
                     std::fs::write(&path, serde_json::to_string_pretty(&studies)?)?;
                 }
+                if let Some(dir) = &plots {
+                    for f in crate::eval::plots::write_all(&studies, dir)? {
+                        println!("wrote {}", f.display());
+                    }
+                }
                 if let Some(path) = markdown {
-                    let command = format!(
+                    let mut command = format!(
                         "spwi-sim eval --all --episodes {episodes} --seed {seed} --markdown {}",
                         path.display()
                     );
-                    std::fs::write(&path, crate::eval::studies::markdown(&studies, &command, &settings))?;
+                    // Figures are linked relative to the page when they sit beside it.
+                    let page_dir = path.parent().unwrap_or(std::path::Path::new(""));
+                    let figures = plots.as_ref().map(|d| {
+                        command += &format!(" --plots {}", d.display());
+                        d.strip_prefix(page_dir).map(|p| p.to_owned()).unwrap_or_else(|_| d.clone())
+                    });
+                    let page = crate::eval::studies::markdown(&studies, &command, &settings, figures.as_deref());
+                    std::fs::write(&path, page)?;
                     println!("wrote {}", path.display());
                 }
                 return Ok(());
@@ -414,6 +431,14 @@ fn run(args: Args) -> Result<()> {
             crate::eval::print(&report);
             if let Some(path) = json {
                 std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+            }
+            if let Some(dir) = plots {
+                std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+                for (name, c) in &report.confusion {
+                    let path = dir.join(format!("confusion_{name}.png"));
+                    crate::eval::plots::confusion(&path, &format!("{name}: share of each true station"), c)?;
+                    println!("wrote {}", path.display());
+                }
             }
             Ok(())
         }

@@ -4,13 +4,15 @@
 //!
 //! - `robot.rs`: one robot's pipeline and the baselines; `cvm.rs`: the constant-velocity model;
 //! - `fleet.rs`: N robots in lock step over one episode, message loss, dropouts, stuck cameras;
-//! - `score.rs`: tallies and accuracies; `studies.rs`: `--all` and docs/RESULTS.md.
+//! - `score.rs`: tallies and accuracies; `studies.rs`: `--all` and docs/RESULTS.md;
+//!   `plots.rs`: the PNG figures of `--plots`.
 //!
 //! Held-out honesty: the episode seeds evaluated are checked against the training
 //! episodes recorded in the model set's manifest, and refused if any is shared.
 
 pub mod cvm;
 pub mod fleet;
+pub mod plots;
 pub mod robot;
 pub mod score;
 pub mod studies;

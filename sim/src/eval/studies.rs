@@ -124,7 +124,10 @@ fn acc(r: &Report, model: &str) -> (String, String) {
 }
 
 /// docs/RESULTS.md: our tables next to the paper's.
-pub fn markdown(st: &Studies, command: &str, s: &Settings) -> String {
+/// `figures`: the folder of `--plots`, relative to the page, to show the figures.
+pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path>) -> String {
+    let figure =
+        |name: &str, alt: &str| figures.map_or(String::new(), |d| format!("\n![{alt}]({})\n", d.join(name).display()));
     let mut m = String::new();
     let w = &mut m;
     let _ = writeln!(w, "# Results: the paper's tables, reproduced on the simulated factory\n");
@@ -187,6 +190,8 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings) -> String {
         for (name, c) in &r.confusion {
             let _ = writeln!(w, "- {name}: {}", c.iter().map(|row| format!("{row:?}")).collect::<Vec<_>>().join(" "));
         }
+        let _ = write!(w, "{}", figure("confusion_ego.png", "ego confusion"));
+        let _ = write!(w, "{}", figure("confusion_collective.png", "collective confusion"));
     }
     let _ = writeln!(w, "\n## Number of robots (scenario 3, 2 s → 2 s) — paper Fig. 5: accuracy grows from 1 to 3 robots, less from 3 to 4\n");
     let _ = writeln!(w, "| robots | ego t | collective t | collective t+1…H | consensus t | coverage | team, all ticks: t | t+1…H | agreement |");
@@ -210,6 +215,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings) -> String {
         w,
         "\nPer-model accuracies are over the ticks where that model predicts (a robot's models when it sees the worker; the consensus when any robot does). Robots 4–8 take layout slots with poorer views, so those averages mix in harder samples; *coverage* (ticks with a team decision) and the *team accuracy over all ticks* (no decision counted as wrong) show what a larger fleet buys."
     );
+    let _ = write!(w, "{}", figure("robots.png", "accuracy against the number of robots"));
     let _ =
         writeln!(w, "\n## Time horizons (scenario 3) — paper Fig. 4: more past helps; best and worst over 3 seeds\n");
     let _ = writeln!(
@@ -235,6 +241,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings) -> String {
             range(&|r| r.models["ego"].t)
         );
     }
+    let _ = write!(w, "{}", figure("horizons.png", "time horizons"));
     let _ = writeln!(w, "\n## Temporal resolution (scenario 3, 3 robots, 1 s → 1 s) — paper Fig. 6\n");
     let _ = writeln!(w, "| frames of the last second | ego t | collective t | collective t+1…H | consensus t |");
     let _ = writeln!(w, "|---|---|---|---|---|");
@@ -249,6 +256,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings) -> String {
             acc(r, "consensus").0
         );
     }
+    let _ = write!(w, "{}", figure("resolution.png", "temporal resolution"));
     let _ = writeln!(w, "\n## Beyond the paper: faults (scenario 3, 4 robots, 2 s → 2 s)\n");
     let _ = writeln!(w, "| fault | collective t | consensus t | consensus t+1…H | team, all ticks: t | agreement |");
     let _ = writeln!(w, "|---|---|---|---|---|---|");
