@@ -76,7 +76,8 @@ fn lines(path: &Path, title: &str, x_desc: &str, x: (f64, f64), series: &[(Strin
     Ok(())
 }
 
-/// A 4 × 4 confusion matrix at t: cells shaded by their share of the true class.
+/// A 4 × 4 confusion matrix at t: cells shaded by their share of the true class
+/// (each row sums to 100 %); station k is the cell from k to k + 1 on each axis.
 pub fn confusion(path: &Path, title: &str, c: &Confusion) -> Result<()> {
     font()?;
     let root = BitMapBackend::new(path, (480, 480)).into_drawing_area();
@@ -91,7 +92,7 @@ pub fn confusion(path: &Path, title: &str, c: &Confusion) -> Result<()> {
     chart
         .configure_mesh()
         .disable_mesh()
-        .x_desc("predicted station")
+        .x_desc("predicted station (cell k to k+1 = station k)")
         .y_desc("true station")
         .x_labels(4)
         .y_labels(4)
@@ -102,7 +103,7 @@ pub fn confusion(path: &Path, title: &str, c: &Confusion) -> Result<()> {
         for (pred, &n) in row.iter().enumerate() {
             let share = n as f64 / total;
             let shade = (255.0 * (1.0 - share)) as u8;
-            let (x, y) = (pred as i32, 3 - truth as i32);
+            let (x, y) = (pred as i32, truth as i32);
             chart
                 .draw_series(std::iter::once(Rectangle::new(
                     [(x, y), (x + 1, y + 1)],
