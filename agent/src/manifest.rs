@@ -62,9 +62,6 @@ pub struct Models {
 }
 
 impl Models {
-    /// The manifest's names of the models the daemon runs.
-    pub const NAMES: [&'static str; 3] = ["gcn", "ego_gru", "collective_gru"];
-
     /// A model's spec by its manifest name.
     pub fn by_name(&self, name: &str) -> Option<&ModelSpec> {
         match name {

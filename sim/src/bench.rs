@@ -7,6 +7,7 @@
 //! Paced mode ticks at 10 Hz, as deployed. `--free` publishes the next tick as soon as
 //! every robot decided the last (or after 200 ms), giving the fleet's maximum rate.
 
+use crate::demo::percentile;
 use crate::layout::Layout;
 use crate::world::{Scenario, World};
 use anyhow::{anyhow, bail, Context, Result};
@@ -105,13 +106,6 @@ impl Drop for Agents {
             let _ = c.wait();
         }
     }
-}
-
-fn percentile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)]
 }
 
 pub async fn run(o: &BenchOptions) -> Result<BenchReport> {

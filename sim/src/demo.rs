@@ -160,7 +160,8 @@ fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoi
     })
 }
 
-fn percentile(sorted: &[f64], q: f64) -> f64 {
+/// The `q` quantile of sorted values (nearest rank); 0 for none.
+pub(crate) fn percentile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return 0.0;
     }

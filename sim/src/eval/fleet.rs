@@ -98,6 +98,7 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
     let mut robots: Vec<RobotPipeline> = (0..n)
         .map(|slot| RobotPipeline::new(RobotId::new(format!("r{slot}"))?, slot, &o.models))
         .collect::<Result<_>>()?;
+    let ids: Vec<RobotId> = robots.iter().map(|r| r.id.clone()).collect();
     let mut live = vec![true; n];
     let mut loss_rng = ChaCha8Rng::seed_from_u64(episode_seed ^ 0x5eed_1055);
     let mut stuck: Vec<Option<DetectionFrame>> = vec![None; n];
@@ -140,7 +141,6 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
         // 2. embeddings cross the network (some lost), each robot predicts and votes
         let embeddings: Vec<(usize, Option<Vec<f32>>)> =
             perceptions.iter().map(|(s, p)| (*s, p.embedding.clone())).collect();
-        let visibility: Vec<(usize, u32)> = perceptions.iter().map(|(s, p)| (*s, p.visibility)).collect();
         let mut per_robot = Vec::with_capacity(perceptions.len());
         for (slot, p) in perceptions {
             let heard: Vec<&[f32]> = embeddings
@@ -149,22 +149,22 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
                 .filter_map(|(_, e)| e.as_deref())
                 .collect();
             let peers_mean = temporal::mean(heard);
-            per_robot.push((slot, robots[slot].predict(t, p, peers_mean, &spots)?));
+            let visibility = p.visibility;
+            per_robot.push((slot, visibility, robots[slot].predict(t, p, peers_mean, &spots)?));
         }
         // 3. votes cross the network; every robot decides over the votes it holds
-        let ids: Vec<RobotId> = (0..n).map(|s| robots[s].id.clone()).collect();
         let mut decisions = Vec::with_capacity(per_robot.len());
-        for &(me, _) in &per_robot {
+        for &(me, _, _) in &per_robot {
             let mut ballots: Vec<Ballot<'_>> = per_robot
                 .iter()
-                .filter(|(s, _)| *s == me || !lost(&mut loss_rng, o.faults.loss))
-                .filter_map(|(s, pr)| {
-                    let v = visibility.iter().find(|(vs, _)| vs == s).map_or(0, |(_, v)| *v);
-                    pr.vote.as_deref().map(|steps| Ballot { robot: &ids[*s], visibility: v, steps })
+                .filter(|(s, _, _)| *s == me || !lost(&mut loss_rng, o.faults.loss))
+                .filter_map(|(s, visibility, pr)| {
+                    pr.vote.as_deref().map(|steps| Ballot { robot: &ids[*s], visibility: *visibility, steps })
                 })
                 .collect();
             decisions.push(decide(&mut ballots, weights).iter().map(|s| s.class).collect::<Vec<u8>>());
         }
+        let per_robot = per_robot.into_iter().map(|(s, _, p)| (s, p)).collect();
         records.push(TickRecord { per_robot, decisions });
     }
 

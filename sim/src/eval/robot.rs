@@ -43,8 +43,8 @@ pub struct RobotPipeline {
     ego: Inference,
     collective: Inference,
     cnn1d: Option<Box<dyn Runner>>,
-    ego_window: Window,
-    collective_window: Window,
+    /// One window serves both GRUs: the ego input is the same rows without the peers' part.
+    window_rows: Window,
     /// The 1D-CNN's rows (worker feature ‖ keypoints) by tick.
     cnn_rows: BTreeMap<u64, Vec<f32>>,
     cvm: Cvm,
@@ -69,8 +69,7 @@ impl RobotPipeline {
             ego: models.inference(TemporalModel::Ego)?,
             collective: models.inference(TemporalModel::Collective)?,
             cnn1d: m.models.cnn1d.is_some().then(|| models.runner("cnn1d")).transpose()?,
-            ego_window: Window::with_frames(m.window, m.frames()),
-            collective_window: Window::with_frames(m.window, m.frames()),
+            window_rows: Window::with_frames(m.window, m.frames()),
             cnn_rows: BTreeMap::new(),
             cvm: Cvm::new(0.1),
             scratch: Vec::new(),
@@ -120,16 +119,14 @@ impl RobotPipeline {
         station_spots: &[[f32; 2]],
     ) -> Result<Predictions> {
         let seen = p.embedding.is_some();
-        let row = Row { own: p.embedding, peers_mean, keypoints: p.keypoints };
-        self.ego_window.insert(t, Row { peers_mean: None, ..row.clone() });
-        self.collective_window.insert(t, row);
+        self.window_rows.insert(t, Row { own: p.embedding, peers_mean, keypoints: p.keypoints });
         let mut out = Predictions { gnn: p.gcn_class, ..Default::default() };
         if !seen {
             return Ok(out);
         }
-        self.ego_window.input(t, TemporalModel::Ego, &mut self.scratch);
+        self.window_rows.input(t, TemporalModel::Ego, &mut self.scratch);
         out.ego = Some(classes(&self.ego.gru(&self.scratch)?));
-        self.collective_window.input(t, TemporalModel::Collective, &mut self.scratch);
+        self.window_rows.input(t, TemporalModel::Collective, &mut self.scratch);
         let logits = self.collective.gru(&self.scratch)?;
         out.collective = Some(classes(&logits));
         out.vote = Some(vote::vote(&logits, self.temperature));
