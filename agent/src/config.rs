@@ -9,7 +9,6 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -180,14 +179,6 @@ impl AgentConfig {
             bail!("tick.event_queue = {}: must be within 16..=1000000", t.event_queue);
         }
         Ok(())
-    }
-
-    pub fn embedding_wait(&self) -> Duration {
-        Duration::from_millis(self.tick.embedding_wait_ms)
-    }
-
-    pub fn decision_deadline(&self) -> Duration {
-        Duration::from_millis(self.tick.decision_deadline_ms)
     }
 }
 

@@ -12,7 +12,6 @@
 //! reported in logs, `/status` and `/metrics`.
 
 use crate::config::AgentConfig;
-use crate::consensus::Weights;
 use crate::engine::{Engine, EngineConfig, Input, Output};
 use crate::model::ModelSet;
 use crate::record::{RecordedConfig, Recorder};
@@ -78,19 +77,7 @@ pub async fn run(
     config.validate()?;
     let instance = random_instance();
     let m = &models.manifest;
-    let weights = Weights {
-        alpha: config.tick.alpha.unwrap_or(m.consensus.alpha),
-        beta: config.tick.beta.unwrap_or(m.consensus.beta),
-    };
-    let engine_config = EngineConfig {
-        robot: robot.clone(),
-        instance,
-        temporal: config.tick.temporal,
-        embedding_wait: config.embedding_wait(),
-        decision_deadline: config.decision_deadline(),
-        weights,
-        max_open_ticks: config.tick.max_open_ticks,
-    };
+    let engine_config = EngineConfig::new(robot.clone(), instance, &config.tick, m);
     let mut recorder = match &record {
         Some(path) => {
             Some(Recorder::create(path, &RecordedConfig { engine: engine_config.clone(), model_set: m.name.clone() })?)

@@ -47,6 +47,31 @@ pub struct EngineConfig {
     pub max_open_ticks: usize,
 }
 
+impl EngineConfig {
+    /// The rules a daemon runs with: timing from its `[tick]` config, consensus weights
+    /// from there or else from the model set's manifest. The daemon and the evaluation
+    /// both build their engines here, so the evaluation judges what robots run.
+    pub fn new(
+        robot: RobotId,
+        instance: u64,
+        tick: &crate::config::TickConfig,
+        manifest: &crate::manifest::Manifest,
+    ) -> Self {
+        EngineConfig {
+            robot,
+            instance,
+            temporal: tick.temporal,
+            embedding_wait: Duration::from_millis(tick.embedding_wait_ms),
+            decision_deadline: Duration::from_millis(tick.decision_deadline_ms),
+            weights: Weights {
+                alpha: tick.alpha.unwrap_or(manifest.consensus.alpha),
+                beta: tick.beta.unwrap_or(manifest.consensus.beta),
+            },
+            max_open_ticks: tick.max_open_ticks,
+        }
+    }
+}
+
 /// Everything that can happen to a robot.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Input {
@@ -119,6 +144,8 @@ pub struct Engine {
     /// Instance ids of other daemons seen using our robot id.
     pub duplicates: BTreeSet<u64>,
     pub last_decision: Option<DecisionMsg>,
+    /// The GCN's spatial-only logits for our latest frame that showed the worker.
+    last_spatial: Option<(u64, [f32; NUM_CLASSES])>,
 }
 
 impl Engine {
@@ -141,6 +168,7 @@ impl Engine {
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
             last_decision: None,
+            last_spatial: None,
         }
     }
 
@@ -154,6 +182,12 @@ impl Engine {
         m.push(self.cfg.robot.clone());
         m.sort();
         m
+    }
+
+    /// The spatial-only prediction (GCN logits) for our frame of `tick`, if it showed
+    /// the worker: what the evaluation scores as the GNN alone.
+    pub fn spatial_logits(&self, tick: u64) -> Option<[f32; NUM_CLASSES]> {
+        self.last_spatial.filter(|(t, _)| *t == tick).map(|(_, l)| l)
     }
 
     /// The earliest time at which [`Input::Poll`] could change something.
@@ -220,7 +254,10 @@ impl Engine {
                 let r = self.inference.gcn(g);
                 self.metrics.observe(Stage::Gcn, t1.elapsed());
                 match r {
-                    Ok(o) => Some(o.embedding),
+                    Ok(o) => {
+                        self.last_spatial = Some((f.tick, o.logits));
+                        Some(o.embedding)
+                    }
                     Err(e) => {
                         self.metrics.model_errors += 1;
                         tracing::error!(tick = f.tick, "GCN failed, not voting this tick: {e:#}");

@@ -8,13 +8,13 @@
 //! every robot decided the last (or after 200 ms), giving the fleet's maximum rate.
 
 use crate::demo::percentile;
-use crate::layout::Layout;
-use crate::world::{Scenario, World};
 use anyhow::{anyhow, bail, Context, Result};
 use serde::Serialize;
 use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
+use spwi_world::layout::Layout;
+use spwi_world::world::{Scenario, World};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};

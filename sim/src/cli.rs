@@ -1,7 +1,7 @@
-//! The `spwi-sim` command line: `world`, `demo`, `dataset`, `eval`, `render`, `stats`.
+//! The `spwi-sim` command line: `world`, `demo`, `dataset`, `eval`, `bench`, `render`,
+//! `stats`, `layout`. Every tool that runs a world takes the same [`WorldArgs`].
 
-use crate::layout::Layout;
-use crate::world::Scenario;
+use crate::world_args::{check_robots, run_layout, LayoutArgs, WorldArgs};
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use spwi_agent::cli::{init_tracing, spawn_signal_handler};
@@ -24,14 +24,10 @@ enum Command {
     World {
         #[arg(long, default_value = "default")]
         fleet: FleetId,
-        /// 1: no obstacles, stationary robots; 2: static obstacles; 3: obstacles and moving robots.
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-        scenario: u8,
+        #[command(flatten)]
+        world: WorldArgs,
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Layout file (TOML); default: the built-in sim/layouts/factory.toml.
-        #[arg(long)]
-        layout: Option<PathBuf>,
         /// Zenoh's own config file (json5).
         #[arg(long, env = "ZENOH_CONFIG")]
         zenoh_config: Option<PathBuf>,
@@ -47,8 +43,8 @@ enum Command {
     Demo {
         #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=8))]
         robots: u64,
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-        scenario: u8,
+        #[command(flatten)]
+        world: WorldArgs,
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// How long to run (e.g. 60s, 2m).
@@ -63,8 +59,6 @@ enum Command {
         /// Model set folder (default: the agent's default).
         #[arg(long)]
         models: Option<PathBuf>,
-        #[arg(long)]
-        layout: Option<PathBuf>,
         /// Write the summary as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -77,8 +71,8 @@ enum Command {
     },
     /// Export training data (.npy arrays + dataset.json) for the models.
     Dataset {
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-        scenario: u8,
+        #[command(flatten)]
+        world: WorldArgs,
         #[arg(long, default_value_t = 100)]
         episodes: u32,
         #[arg(long, default_value_t = 4)]
@@ -106,13 +100,11 @@ enum Command {
         /// Also write the worker node's 1024-d feature per row (the 1D-CNN baseline's input).
         #[arg(long)]
         human_features: bool,
-        #[arg(long)]
-        layout: Option<PathBuf>,
     },
     /// Reproduce the paper's tables on held-out episodes with the agent's own pipeline.
     Eval {
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-        scenario: u8,
+        #[command(flatten)]
+        world: WorldArgs,
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=8))]
         robots: u64,
         /// Ticks of history (selects the model set, with --horizon and --frames).
@@ -126,9 +118,7 @@ enum Command {
         /// A model set folder (instead of choosing by --window/--horizon/--frames).
         #[arg(long)]
         models: Option<PathBuf>,
-        #[arg(long)]
-        layout: Option<PathBuf>,
-        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..))]
+        #[arg(long, default_value_t = crate::eval::DEFAULT_EPISODES, value_parser = clap::value_parser!(u32).range(1..))]
         episodes: u32,
         /// Evaluation seed; episodes the models were trained on are refused.
         #[arg(long, default_value_t = crate::eval::DEFAULT_SEED)]
@@ -145,6 +135,9 @@ enum Command {
         /// Robots (lowest slots) whose camera is stuck on a frame showing the worker.
         #[arg(long, default_value_t = 0)]
         faulty: usize,
+        /// Mean delay of a message between robots, ms (default: loopback-like, 0.5 ms).
+        #[arg(long, default_value_t = 0.0)]
+        delay: f64,
         /// Write every figure as JSON to this file.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -169,8 +162,8 @@ enum Command {
         /// Publish the next tick as soon as every robot decided (the maximum rate).
         #[arg(long)]
         free: bool,
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-        scenario: u8,
+        #[arg(long, default_value = "3", value_parser = crate::world_args::parse_scenario)]
+        scenario: spwi_world::world::Scenario,
         /// The spwi-agent binary (default: next to this one).
         #[arg(long)]
         agent: Option<PathBuf>,
@@ -182,8 +175,8 @@ enum Command {
     },
     /// Draw the floor and every robot's detections at one tick into a PNG.
     Render {
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-        scenario: u8,
+        #[command(flatten)]
+        world: WorldArgs,
         #[arg(long, default_value_t = 1)]
         seed: u64,
         #[arg(long, default_value_t = 100)]
@@ -192,13 +185,11 @@ enum Command {
         robots: usize,
         #[arg(long, default_value = "scene.png")]
         out: PathBuf,
-        #[arg(long)]
-        layout: Option<PathBuf>,
     },
     /// Measure how hard a scenario is (who sees the worker, detections, phases, goal changes).
     Stats {
-        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-        scenario: u8,
+        #[command(flatten)]
+        world: WorldArgs,
         #[arg(long, default_value_t = 4)]
         robots: usize,
         #[arg(long, default_value_t = 20)]
@@ -208,30 +199,27 @@ enum Command {
         ticks: u32,
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        #[arg(long)]
-        layout: Option<PathBuf>,
         /// Print JSON instead of a table.
         #[arg(long)]
         json: bool,
+        /// Instead: coverage (ticks on which some robot sees the worker) for fleets of
+        /// 1-8 robots under `fixed` and `track` cameras.
+        #[arg(long)]
+        coverage: bool,
     },
-}
-
-fn layout(path: Option<PathBuf>) -> Result<Layout> {
-    match path {
-        Some(p) => Layout::load(&p),
-        None => Ok(Layout::default_layout()),
-    }
+    /// Write a floor to a TOML file: generated from a seed, or a mirrored copy.
+    Layout(LayoutArgs),
 }
 
 fn run(args: Args) -> Result<()> {
     match args.command {
-        Command::World { fleet, scenario, seed, layout: l, zenoh_config, cfg, tick_ms } => {
+        Command::World { fleet, world, seed, zenoh_config, cfg, tick_ms } => {
             init_tracing(LogFormat::Human);
             let opts = crate::service::WorldOptions {
                 fleet,
-                scenario: Scenario::from_number(scenario)?,
+                scenario: world.scenario,
                 seed,
-                layout: layout(l)?,
+                layout: world.floor()?.layout,
                 zenoh: spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?,
                 tick: Duration::from_millis(tick_ms),
             };
@@ -242,19 +230,7 @@ fn run(args: Args) -> Result<()> {
                 crate::service::run(opts, rx).await
             })
         }
-        Command::Demo {
-            robots,
-            scenario,
-            seed,
-            duration,
-            kill_after,
-            join_after,
-            models,
-            layout: l,
-            json,
-            quiet,
-            http,
-        } => {
+        Command::Demo { robots, world, seed, duration, kill_after, join_after, models, json, quiet, http } => {
             init_tracing(LogFormat::Human);
             let mut agent = spwi_agent::config::AgentConfig::load(None)?;
             if let Some(m) = models {
@@ -263,12 +239,12 @@ fn run(args: Args) -> Result<()> {
             let set = spwi_agent::daemon::load_models(&agent)?;
             let opts = crate::demo::DemoOptions {
                 robots: robots as usize,
-                scenario: Scenario::from_number(scenario)?,
+                scenario: world.scenario,
                 seed,
                 duration,
                 kill_after,
                 join_after,
-                layout: layout(l)?,
+                layout: world.floor()?.layout,
                 agent,
                 view: !quiet,
                 http,
@@ -288,7 +264,7 @@ fn run(args: Args) -> Result<()> {
             Ok(())
         }
         Command::Dataset {
-            scenario,
+            world,
             episodes,
             robots,
             ticks,
@@ -299,12 +275,9 @@ fn run(args: Args) -> Result<()> {
             max_nodes,
             edge_weight,
             human_features,
-            layout: l,
         } => {
-            let l = layout(l)?;
-            if robots == 0 || robots > l.robots.len() {
-                anyhow::bail!("--robots {robots}: the layout has slots for 1..={} robots", l.robots.len());
-            }
+            let floors = world.floors()?;
+            check_robots(robots, &floors)?;
             if episodes == 0 || ticks == 0 {
                 anyhow::bail!("--episodes and --ticks must be at least 1");
             }
@@ -320,14 +293,14 @@ fn run(args: Args) -> Result<()> {
             }
             let started = std::time::Instant::now();
             let (samples, rows) = crate::dataset::export(&crate::dataset::DatasetOptions {
-                scenario: Scenario::from_number(scenario)?,
+                scenario: world.scenario,
                 episodes,
                 robots,
                 ticks,
                 seed,
                 out: out.clone(),
                 spatial_every,
-                layout: l,
+                floors,
                 max_nodes,
                 edge_weight,
                 gcn,
@@ -341,29 +314,32 @@ fn run(args: Args) -> Result<()> {
             Ok(())
         }
         Command::Eval {
-            scenario,
+            world,
             robots,
             window,
             horizon,
             frames,
             models,
-            layout: l,
             episodes,
             seed,
             ticks,
             dropouts,
             loss,
             faulty,
+            delay,
             json,
             all,
             markdown,
             plots,
         } => {
-            let layout_name = l.as_ref().map_or("factory.toml (built in)".to_owned(), |p| p.display().to_string());
-            let l = layout(l)?;
+            let floors = world.floors()?;
             let robots = robots as usize;
+            check_robots(robots, &floors)?;
             if !(0.0..=1.0).contains(&loss) {
                 anyhow::bail!("--loss {loss}: a probability, 0 to 1");
+            }
+            if !(0.0..=10_000.0).contains(&delay) {
+                anyhow::bail!("--delay {delay}: milliseconds, 0 to 10000");
             }
             if dropouts >= robots || faulty > robots {
                 anyhow::bail!(
@@ -372,16 +348,11 @@ fn run(args: Args) -> Result<()> {
             }
             let root = std::path::Path::new("models");
             if all {
-                let unseen = std::path::Path::new("sim/layouts/factory-moved.toml");
                 let settings = crate::eval::studies::Settings {
                     models_root: root.to_owned(),
-                    layout: l,
-                    layout_name,
-                    unseen_layout: if unseen.is_file() {
-                        Some((Layout::load(unseen)?, unseen.display().to_string()))
-                    } else {
-                        None
-                    },
+                    floors,
+                    floors_name: world.describe(),
+                    camera: world.camera,
                     episodes,
                     seed,
                     ticks,
@@ -418,15 +389,15 @@ fn run(args: Args) -> Result<()> {
             };
             let models = spwi_agent::model::ModelSet::load(&dir, spwi_agent::model::Backend::Tract, None)?;
             let report = crate::eval::run(&crate::eval::EvalOptions {
-                scenario: Scenario::from_number(scenario)?,
+                scenario: world.scenario,
                 robots,
                 models,
-                layout: l,
-                layout_name,
+                floors,
+                floors_name: world.describe(),
                 episodes,
                 seed,
                 ticks,
-                faults: crate::eval::Faults { dropouts, loss, faulty },
+                faults: crate::eval::Faults { dropouts, loss, faulty, delay_ms: delay },
             })?;
             crate::eval::print(&report);
             if let Some(path) = json {
@@ -452,7 +423,7 @@ fn run(args: Args) -> Result<()> {
                 robots: robots as usize,
                 duration,
                 free_running: free,
-                scenario: Scenario::from_number(scenario)?,
+                scenario,
                 agent,
                 models,
             };
@@ -464,22 +435,27 @@ fn run(args: Args) -> Result<()> {
             }
             Ok(())
         }
-        Command::Render { scenario, seed, tick, robots, out, layout: l } => {
-            let l = layout(l)?;
-            if robots == 0 || robots > l.robots.len() {
-                anyhow::bail!("--robots {robots}: the layout has slots for 1..={} robots", l.robots.len());
-            }
-            let world = crate::world::World::new(l, Scenario::from_number(scenario)?, seed, robots);
+        Command::Render { world: w, seed, tick, robots, out } => {
+            let floor = w.floor()?;
+            check_robots(robots, std::slice::from_ref(&floor))?;
+            let world = spwi_world::world::World::new(floor.layout, w.scenario, seed, robots);
             crate::render::render_tick(world, robots, tick, &out)?;
             println!("wrote {}", out.display());
             Ok(())
         }
-        Command::Stats { scenario, robots, episodes, ticks, seed, layout: l, json } => {
-            let l = layout(l)?;
-            if robots == 0 || robots > l.robots.len() {
-                anyhow::bail!("--robots {robots}: the layout has slots for 1..={} robots", l.robots.len());
+        Command::Stats { world, robots, episodes, ticks, seed, json, coverage } => {
+            let floors = world.floors()?;
+            if coverage {
+                let c = crate::stats::coverage(&floors, world.scenario, episodes, ticks, seed);
+                if json {
+                    println!("{}", serde_json::to_string_pretty(&c)?);
+                } else {
+                    crate::stats::print_coverage(&c);
+                }
+                return Ok(());
             }
-            let d = crate::stats::measure(&l, Scenario::from_number(scenario)?, robots, episodes, ticks, seed);
+            check_robots(robots, &floors)?;
+            let d = crate::stats::measure(&floors, world.scenario, robots, episodes, ticks, seed);
             if json {
                 println!("{}", serde_json::to_string_pretty(&d)?);
             } else {
@@ -498,10 +474,11 @@ fn run(args: Args) -> Result<()> {
                     d.phase_stationary * 100.0
                 );
                 println!("  goal changes per trip         {:.2}", d.goal_changes_per_trip);
-                println!("  near both close stations      {:.1}%", d.near_close_stations * 100.0);
+                println!("  near both stations of a close pair  {:.1}%", d.near_close_stations * 100.0);
             }
             Ok(())
         }
+        Command::Layout(a) => run_layout(&a),
     }
 }
 

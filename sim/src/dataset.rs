@@ -18,15 +18,15 @@
 //! Episodes are split 60/20/20 (train/validation/test) by episode index, as in the paper.
 //! `dataset.json` describes every array.
 
-use crate::layout::Layout;
 use crate::npy::NpyWriter;
-use crate::world::{Scenario, World};
 use anyhow::{Context, Result};
 use serde_json::json;
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::model::{Backend, Gcn};
 use spwi_agent::temporal::normalise_keypoints;
 use spwi_proto::{RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
+use spwi_world::generate::NamedLayout;
+use spwi_world::world::{Scenario, World};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -41,7 +41,8 @@ pub struct DatasetOptions {
     pub seed: u64,
     pub out: PathBuf,
     pub spatial_every: u32,
-    pub layout: Layout,
+    /// Episode e runs on floor e mod floors.len().
+    pub floors: Vec<NamedLayout>,
     /// Graph size and edge weights; from the GCN's manifest when given.
     pub max_nodes: usize,
     pub edge_weight: spwi_agent::graph::EdgeWeight,
@@ -153,7 +154,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     let started = Instant::now();
     let mut last_report = 0;
     for e in 0..o.episodes {
-        let mut world = World::new(o.layout.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
+        let floor = &o.floors[e as usize % o.floors.len()].layout;
+        let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
         let total = o.ticks as usize + FUTURE;
         let mut intents = Vec::with_capacity(total);
         let mut phases = Vec::with_capacity(total);
@@ -266,6 +268,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         "ticks_per_episode": o.ticks,
         "seed": o.seed,
         "episode_seed": "seed * 1000003 + episode",
+        "floors": o.floors.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(),
+        "floor_of_episode": "floors[episode mod len(floors)]",
         "split": "by episode index: first 60% train (0), next 20% validation (1), last 20% test (2)",
         "classes": spwi_proto::STATION_NAMES,
         "max_nodes": n,
@@ -332,7 +336,7 @@ mod tests {
             seed: 3,
             out: dir.to_owned(),
             spatial_every: 2,
-            layout: Layout::default_layout(),
+            floors: vec![NamedLayout { name: "test".into(), layout: spwi_world::layout::Layout::default_layout() }],
             max_nodes: 16,
             edge_weight: spwi_agent::graph::EdgeWeight::Proximity,
             gcn,

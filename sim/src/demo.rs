@@ -4,9 +4,7 @@
 //! sums it up at the end. `--kill-after` / `--join-after` remove and add an agent
 //! while it runs, so membership changes can be watched.
 
-use crate::layout::Layout;
 use crate::service::{self, WorldOptions};
-use crate::world::Scenario;
 use anyhow::{anyhow, Context, Result};
 use serde::Serialize;
 use spwi_agent::config::AgentConfig;
@@ -15,6 +13,8 @@ use spwi_agent::model::ModelSet;
 use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
+use spwi_world::layout::Layout;
+use spwi_world::world::Scenario;
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};

@@ -4,11 +4,11 @@
 //! station's colour, unknown classes in grey), so a person can check by eye that the
 //! world is sane. A tiny rasteriser writes the PNG; no fonts (the colours are the key).
 
-use crate::camera::ROBOT_RADIUS;
-use crate::geometry::P2;
-use crate::world::World;
 use anyhow::{Context, Result};
 use spwi_proto::{DetectionFrame, RobotId};
+use spwi_world::camera::ROBOT_RADIUS;
+use spwi_world::geometry::P2;
+use spwi_world::world::World;
 use std::path::Path;
 
 type Rgb = [u8; 3];
@@ -117,10 +117,12 @@ pub fn render(world: &World, frames: &[(usize, DetectionFrame)], out: &Path) -> 
         let w = to(s.work_spot);
         c.frame(w.0 - 5.0, w.1 - 5.0, w.0 + 5.0, w.1 + 5.0, col);
     }
-    for (slot, _) in frames {
-        let p = world.robots[*slot].pose;
+    // every robot on the floor; those outside the fleet (no agent running) in grey
+    for (slot, r) in world.robots.iter().enumerate() {
+        let p = r.pose;
         let q = to(p.position);
-        c.disc(q.0, q.1, ROBOT_RADIUS * k, DARK);
+        let in_view = frames.iter().any(|(s, _)| *s == slot);
+        c.disc(q.0, q.1, ROBOT_RADIUS * k, if in_view { DARK } else { GREY });
         let nose = to([p.position[0] + 0.6 * p.heading.cos(), p.position[1] + 0.6 * p.heading.sin()]);
         c.line(q, nose, DARK);
     }
@@ -166,8 +168,8 @@ pub fn render_tick(mut world: World, robots: usize, tick: u64, out: &Path) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::layout::Layout;
-    use crate::world::Scenario;
+    use spwi_world::layout::Layout;
+    use spwi_world::world::Scenario;
 
     #[test]
     fn renders_a_png_with_map_and_views() {

@@ -4,11 +4,11 @@
 //! publishes each live robot's detection frame, exactly as a detector node on that
 //! robot would, and the ground truth for scoring.
 
-use crate::layout::Layout;
-use crate::world::{Scenario, World};
 use anyhow::{anyhow, Result};
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
+use spwi_world::layout::Layout;
+use spwi_world::world::{Scenario, World};
 use std::collections::BTreeMap;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
@@ -84,11 +84,11 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
             Some((robot, alive)) = rx.recv() => {
                 if alive {
                     match slots.join(robot.clone()) {
-                        Some(s) => { world.set_present(s, true); tracing::info!(%robot, slot = s, "robot joined"); }
+                        Some(s) => { world.set_in_fleet(s, true); tracing::info!(%robot, slot = s, "robot joined"); }
                         None => tracing::warn!(%robot, "no free robot slot in the layout: this robot gets no frames"),
                     }
                 } else if let Some(s) = slots.leave(&robot) {
-                    world.set_present(s, false);
+                    world.set_in_fleet(s, false);
                     tracing::info!(%robot, slot = s, "robot left");
                 }
             }

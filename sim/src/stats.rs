@@ -1,13 +1,15 @@
 //! `spwi-sim stats`: figures that show the task is not trivial — how often each robot
 //! sees the worker, how many detections a frame holds, how the worker's time splits
-//! between moving, transitions and working, how often it changes its mind, and how
-//! often it is near the two close stations.
+//! between moving, transitions and working, how often it changes its mind, how often
+//! it is near both stations of a close pair — and, with `--coverage`, how often some
+//! robot of a fleet of 1 to 8 sees the worker under each camera policy.
 
-use crate::geometry::dist;
-use crate::layout::Layout;
-use crate::world::{Scenario, World};
 use serde::Serialize;
 use spwi_proto::{RobotId, WorkerPhase};
+use spwi_world::generate::NamedLayout;
+use spwi_world::geometry::dist;
+use spwi_world::layout::CameraPolicy;
+use spwi_world::world::{Scenario, World};
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Difficulty {
@@ -24,18 +26,31 @@ pub struct Difficulty {
     pub phase_stationary: f64,
     /// Goal changes mid-way per trip started.
     pub goal_changes_per_trip: f64,
-    /// Share of ticks the worker is within 3 m of both the assembly and manufacturing spots.
+    /// Share of ticks the worker is within 3 m of both work spots of a close pair.
     pub near_close_stations: f64,
 }
 
-pub fn measure(layout: &Layout, scenario: Scenario, robots: usize, episodes: u32, ticks: u32, seed: u64) -> Difficulty {
+/// Episode `e` runs on floor `e mod floors`.
+pub fn measure(
+    floors: &[NamedLayout],
+    scenario: Scenario,
+    robots: usize,
+    episodes: u32,
+    ticks: u32,
+    seed: u64,
+) -> Difficulty {
     let ids: Vec<RobotId> = (0..robots).map(|i| RobotId::new(format!("r{i}")).expect("valid id")).collect();
     let mut seen = vec![0u64; robots];
     let (mut nobody, mut detections, mut frames) = (0u64, 0u64, 0u64);
     let (mut moving, mut transition, mut stationary, mut near) = (0u64, 0u64, 0u64, 0u64);
     let (mut changes, mut trips) = (0u64, 0u64);
-    let (s2, s3) = (layout.station(2).work_spot, layout.station(3).work_spot);
     for e in 0..episodes {
+        let layout = &floors[e as usize % floors.len()].layout;
+        let pairs: Vec<_> = layout
+            .close_pairs()
+            .iter()
+            .map(|&(a, b)| (layout.station(a).work_spot, layout.station(b).work_spot))
+            .collect();
         let mut w = World::new(layout.clone(), scenario, seed.wrapping_add(e as u64), robots);
         for _ in 0..ticks {
             w.step();
@@ -56,7 +71,7 @@ pub fn measure(layout: &Layout, scenario: Scenario, robots: usize, episodes: u32
                 WorkerPhase::Stationary => stationary += 1,
             }
             let p = w.worker.position;
-            near += u64::from(dist(p, s2) < 3.0 && dist(p, s3) < 3.0);
+            near += u64::from(pairs.iter().any(|&(a, b)| dist(p, a) < 3.0 && dist(p, b) < 3.0));
         }
         changes += w.worker.goal_changes as u64;
         trips += w.worker.arrivals as u64 + 1;
@@ -74,5 +89,55 @@ pub fn measure(layout: &Layout, scenario: Scenario, robots: usize, episodes: u32
         phase_stationary: stationary as f64 / n,
         goal_changes_per_trip: changes as f64 / trips.max(1) as f64,
         near_close_stations: near as f64 / n,
+    }
+}
+
+/// Coverage of fleets of 1..=8 robots under one camera policy.
+#[derive(Debug, Clone, Serialize)]
+pub struct Coverage {
+    pub camera: CameraPolicy,
+    /// Index k: share of ticks on which some robot of a fleet of k + 1 sees the worker.
+    pub by_robots: Vec<f64>,
+}
+
+/// Coverage for fleets of 1-8 robots under `fixed` and `track` cameras (episode e on
+/// floor e mod floors; the same worker walks whatever the fleet).
+pub fn coverage(floors: &[NamedLayout], scenario: Scenario, episodes: u32, ticks: u32, seed: u64) -> Vec<Coverage> {
+    let ids: Vec<spwi_proto::RobotId> =
+        (0..8).map(|i| spwi_proto::RobotId::new(format!("r{i}")).expect("valid id")).collect();
+    [CameraPolicy::Fixed, CameraPolicy::Track]
+        .into_iter()
+        .map(|camera| {
+            let by_robots = (1..=8usize)
+                .map(|n| {
+                    let mut seen = 0u64;
+                    for e in 0..episodes {
+                        let mut layout = floors[e as usize % floors.len()].layout.clone();
+                        layout.camera.policy = camera;
+                        let n = n.min(layout.robots.len());
+                        let mut w = World::new(layout, scenario, seed.wrapping_add(e as u64), n);
+                        for _ in 0..ticks {
+                            w.step();
+                            let mut any = false;
+                            for (slot, id) in ids.iter().enumerate().take(n) {
+                                any |= w.observe(slot, id).human.is_some();
+                            }
+                            seen += u64::from(any);
+                        }
+                    }
+                    seen as f64 / (episodes as u64 * ticks as u64).max(1) as f64
+                })
+                .collect();
+            Coverage { camera, by_robots }
+        })
+        .collect()
+}
+
+pub fn print_coverage(c: &[Coverage]) {
+    println!("coverage: share of ticks on which some robot sees the worker");
+    println!("  {:<8} {}", "robots", (1..=8).map(|n| format!("{n:>6}")).collect::<String>());
+    for row in c {
+        let name = format!("{:?}", row.camera).to_lowercase();
+        println!("  {:<8} {}", name, row.by_robots.iter().map(|v| format!("{:>5.1}%", 100.0 * v)).collect::<String>());
     }
 }

@@ -5,9 +5,9 @@
 //! Run: `cargo test -p spwi-tests --test demo`.
 
 use spwi_sim::demo::{self, DemoOptions};
-use spwi_sim::layout::Layout;
-use spwi_sim::world::Scenario;
 use spwi_tests::*;
+use spwi_world::layout::Layout;
+use spwi_world::world::Scenario;
 use std::time::Duration;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]

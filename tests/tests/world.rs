@@ -6,10 +6,10 @@
 use spwi_agent::config::AgentConfig;
 use spwi_proto::keys;
 use spwi_proto::*;
-use spwi_sim::layout::Layout;
 use spwi_sim::service::{self, WorldOptions};
-use spwi_sim::world::Scenario;
 use spwi_tests::*;
+use spwi_world::layout::Layout;
+use spwi_world::world::Scenario;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 

@@ -7,9 +7,9 @@
 //! The prediction is the same for t and every future step: the model has no notion of
 //! a goal changing.
 
-use crate::geometry::P2;
-use crate::layout::Camera;
 use spwi_proto::RobotPose;
+use spwi_world::geometry::P2;
+use spwi_world::layout::Camera;
 use std::collections::VecDeque;
 
 /// Height of the nose keypoint of the simulated worker (skeleton.rs), metres.
@@ -168,12 +168,12 @@ mod tests {
 
     #[test]
     fn back_projection_inverts_the_camera() {
-        let cam = crate::layout::Layout::default_layout().camera;
+        let cam = spwi_world::layout::Layout::default_layout().camera;
         let pose = RobotPose { robot: spwi_proto::RobotId::new("r").unwrap(), position: [1.0, 2.0], heading: 0.7 };
         let p = [4.0, 5.0];
-        let img = crate::camera::project(
+        let img = spwi_world::camera::project(
             &cam,
-            crate::camera::Pose { position: pose.position, heading: pose.heading },
+            spwi_world::camera::Pose { position: pose.position, heading: pose.heading },
             [p[0], p[1], HEAD_HEIGHT],
         )
         .unwrap();

@@ -1,18 +1,26 @@
-//! The evaluation's fleet: N robot pipelines in one process, ticking in lock step over
-//! held-out episodes as fast as the CPU goes. Each robot hears its peers' embeddings and
-//! votes as it would over Zenoh — minus any message the fault model loses — and decides
-//! with the agent's own consensus over the votes it holds, as the daemon does.
+//! The evaluation's fleet: one held-out episode, N real engines (the daemon's
+//! `Engine`, with the daemon's default timing) on a virtual clock behind the in-memory
+//! [`Bus`] and its fault model, as fast as the CPU goes. Each tick the world delivers
+//! every live robot's frame; the engines exchange embeddings, votes and decisions over
+//! the bus, and what they publish — each robot's vote and team decision — is scored.
+//! The ego-GRU and the baselines run as [`Observers`] beside them.
 
-use super::robot::{Predictions, RobotPipeline};
+use super::bus::{Bus, Net};
+use super::observers::{Observers, Predictions};
 use super::score::{confuse, Confusion, Tally};
 use super::EvalOptions;
-use crate::world::World;
 use anyhow::Result;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-use spwi_agent::consensus::{decide, Ballot, Weights};
-use spwi_agent::temporal;
-use spwi_proto::{DetectionFrame, RobotId, RobotPose};
+use spwi_agent::config::TickConfig;
+use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
+use spwi_agent::temporal::TemporalModel;
+use spwi_agent::vote;
+use spwi_proto::{DetectionFrame, RobotId, RobotPose, NUM_CLASSES};
+use spwi_world::layout::Layout;
+use spwi_world::world::{stream, Stream, World};
+use std::time::Duration;
+
+/// The tick period: the world's 10 Hz, as the daemon lives it.
+const TICK: Duration = Duration::from_millis(100);
 
 /// Tallies of one or more episodes.
 #[derive(Debug, Clone, Default)]
@@ -26,6 +34,8 @@ pub struct Tallies {
     pub team_all_ticks: Tally,
     pub cvm: Tally,
     pub cnn1d: Tally,
+    /// The same, on the ticks where the worker heads to a station of a close pair.
+    pub close_pair: ClosePair,
     /// Per robot slot: gnn, ego, collective.
     pub per_robot: Vec<[Tally; 3]>,
     pub confusion_ego: Confusion,
@@ -50,6 +60,11 @@ impl Tallies {
             (&mut self.team_all_ticks, &o.team_all_ticks),
             (&mut self.cvm, &o.cvm),
             (&mut self.cnn1d, &o.cnn1d),
+            (&mut self.close_pair.ego, &o.close_pair.ego),
+            (&mut self.close_pair.collective, &o.close_pair.collective),
+            (&mut self.close_pair.consensus, &o.close_pair.consensus),
+            (&mut self.close_pair.team_all_ticks, &o.close_pair.team_all_ticks),
+            (&mut self.close_pair.cvm, &o.close_pair.cvm),
         ] {
             a.merge(b);
         }
@@ -77,100 +92,121 @@ impl Tallies {
     }
 }
 
+/// Tallies on the ticks where the true intent at t is a station of a close pair
+/// (work spots within 3.5 m): the hard case.
+#[derive(Debug, Clone, Default)]
+pub struct ClosePair {
+    pub ego: Tally,
+    pub collective: Tally,
+    pub consensus: Tally,
+    pub team_all_ticks: Tally,
+    pub cvm: Tally,
+}
+
 /// What one tick left for scoring once the future truth is known.
 struct TickRecord {
     per_robot: Vec<(usize, Predictions)>,
-    /// Each live robot's team decision (class per step; empty if no votes).
+    /// Each live robot's team decision (class per step; empty if no votes or none made).
     decisions: Vec<Vec<u8>>,
 }
 
-/// Runs episode `e` of the evaluation and returns its tallies.
-pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
+/// The daemon's own timing (`[tick]` defaults) for robot `slot` of an evaluation.
+fn engine(slot: usize, o: &EvalOptions) -> Result<Engine> {
+    let id = RobotId::new(format!("r{slot}"))?;
+    let cfg = EngineConfig::new(id, slot as u64 + 1, &TickConfig::default(), &o.models.manifest);
+    Ok(Engine::new(cfg, o.models.inference(TemporalModel::Collective)?))
+}
+
+/// The network of an evaluation: loopback-like (0.5 ms ± 0.5 ms) unless `--delay`.
+pub fn net(f: &super::Faults) -> Net {
+    let delay = Duration::from_secs_f64(f.delay_ms.max(0.5) / 1e3);
+    Net { loss: f.loss, delay, jitter: delay }
+}
+
+/// Runs one episode of the evaluation on `layout` and returns its tallies.
+pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Tallies> {
     let n = o.robots;
     let ticks = o.ticks as usize;
     let horizon = o.models.manifest.horizon;
-    let mut world = World::new(o.layout.clone(), o.scenario, episode_seed, n);
-    let spots: Vec<[f32; 2]> = {
-        let mut s: Vec<_> = o.layout.stations.iter().map(|s| (s.id, s.work_spot)).collect();
-        s.sort_by_key(|(id, _)| *id);
-        s.into_iter().map(|(_, p)| p).collect()
-    };
-    let mut robots: Vec<RobotPipeline> = (0..n)
-        .map(|slot| RobotPipeline::new(RobotId::new(format!("r{slot}"))?, slot, &o.models))
-        .collect::<Result<_>>()?;
-    let ids: Vec<RobotId> = robots.iter().map(|r| r.id.clone()).collect();
-    let mut live = vec![true; n];
-    let mut loss_rng = ChaCha8Rng::seed_from_u64(episode_seed ^ 0x5eed_1055);
+    let mut world = World::new(layout.clone(), o.scenario, episode_seed, n);
+    let spots: Vec<[f32; 2]> = (0..NUM_CLASSES as u8).map(|k| layout.station(k).work_spot).collect();
+    let in_close_pair: Vec<bool> =
+        (0..NUM_CLASSES as u8).map(|k| layout.close_pairs().iter().any(|&(a, b)| a == k || b == k)).collect();
+    let engines = (0..n).map(|slot| engine(slot, o)).collect::<Result<Vec<_>>>()?;
+    let ids: Vec<RobotId> = engines.iter().map(|e| e.config().robot.clone()).collect();
+    let mut observers = (0..n).map(|_| Observers::new(&o.models)).collect::<Result<Vec<_>>>()?;
+    let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
     let mut stuck: Vec<Option<DetectionFrame>> = vec![None; n];
-    let weights = Weights { alpha: o.models.manifest.consensus.alpha, beta: o.models.manifest.consensus.beta };
     let mut intents = Vec::with_capacity(ticks + horizon);
     let mut records = Vec::with_capacity(ticks);
     let mut tallies = Tallies { per_robot: vec![Default::default(); n], ..Default::default() };
 
-    for t in 0..(ticks + horizon) as u64 {
+    // A fleet already running when the episode starts: one unscored tick in which every
+    // robot hears from every other (a cold fleet's first tick is decided by each robot
+    // alone, since peers count from their first message).
+    for (slot, id) in ids.iter().enumerate() {
+        bus.deliver(slot, Input::Frame(world.observe(slot, id)), Duration::ZERO);
+    }
+    bus.run_until(TICK, |_, _, _| {});
+
+    for step in 0..ticks + horizon {
         world.step();
         intents.push(world.worker.goal);
-        if t >= ticks as u64 {
+        if step >= ticks {
             continue;
         }
-        if o.faults.dropouts > 0 && t == ticks as u64 / 2 {
-            let first_leaver = n.saturating_sub(o.faults.dropouts);
-            for (slot, alive) in live.iter_mut().enumerate().skip(first_leaver) {
-                *alive = false;
-                world.set_present(slot, false);
+        let tick = world.tick;
+        let now = TICK * tick as u32;
+        if o.faults.dropouts > 0 && step == ticks / 2 {
+            for slot in n.saturating_sub(o.faults.dropouts)..n {
+                bus.leave(slot, now);
+                world.set_in_fleet(slot, false);
             }
         }
-        // 1. every live robot perceives
-        let mut perceptions = Vec::with_capacity(n);
-        for (slot, r) in robots.iter_mut().enumerate() {
-            if !live[slot] {
+        // Every live robot's camera delivers its frame to its engine.
+        for (slot, obs) in observers.iter_mut().enumerate() {
+            if !bus.is_live(slot) {
                 continue;
             }
-            let mut frame = world.observe(slot, &r.id);
+            let mut frame = world.observe(slot, &ids[slot]);
             if slot < o.faults.faulty {
                 frame = stuck_camera(&mut stuck[slot], frame);
             }
-            let pose = RobotPose {
-                robot: r.id.clone(),
-                position: world.robots[slot].pose.position,
-                heading: world.robots[slot].pose.heading,
-            };
-            perceptions.push((slot, r.perceive(&frame, &pose, &o.layout.camera)?));
+            let r = &world.robots[slot];
+            let pose = RobotPose { robot: ids[slot].clone(), position: r.pose.position, heading: r.pose.heading };
+            obs.see(&frame, &pose, &layout.camera);
+            bus.deliver(slot, Input::Frame(frame), now);
             tallies.frames += 1;
         }
-        // 2. embeddings cross the network (some lost), each robot predicts and votes
-        let embeddings: Vec<(usize, Option<Vec<f32>>)> =
-            perceptions.iter().map(|(s, p)| (*s, p.embedding.clone())).collect();
-        let mut per_robot = Vec::with_capacity(perceptions.len());
-        for (slot, p) in perceptions {
-            let heard: Vec<&[f32]> = embeddings
-                .iter()
-                .filter(|(s, e)| *s != slot && e.is_some() && !lost(&mut loss_rng, o.faults.loss))
-                .filter_map(|(_, e)| e.as_deref())
-                .collect();
-            let peers_mean = temporal::mean(heard);
-            let visibility = p.visibility;
-            per_robot.push((slot, visibility, robots[slot].predict(t, p, peers_mean, &spots)?));
+        // The tick plays out on the bus; the engines' own outputs are what is scored.
+        let mut embeddings: Vec<Option<Vec<f32>>> = vec![None; n];
+        let mut votes: Vec<Option<Vec<u8>>> = vec![None; n];
+        let mut decided: Vec<Option<Vec<u8>>> = vec![None; n];
+        bus.run_until(now + TICK, |slot, _, out| match out {
+            Output::Embedding(e) if e.tick == tick => embeddings[slot] = e.embedding.clone(),
+            Output::Vote(v) if v.tick == tick => votes[slot] = Some(v.steps.iter().map(|s| s.class).collect()),
+            Output::Decision(d) if d.tick == tick => decided[slot] = Some(d.steps.iter().map(|s| s.class).collect()),
+            _ => {}
+        });
+        let mut per_robot = Vec::with_capacity(n);
+        let mut decisions = Vec::with_capacity(n);
+        for (slot, obs) in observers.iter_mut().enumerate() {
+            if !bus.is_live(slot) {
+                continue;
+            }
+            let mut p = obs.predict(tick, embeddings[slot].take(), &spots)?;
+            p.gnn = bus.engine(slot).spatial_logits(tick).map(|l| vote::argmax(&l) as u8);
+            p.collective = votes[slot].take();
+            per_robot.push((slot, p));
+            decisions.push(decided[slot].take().unwrap_or_default());
         }
-        // 3. votes cross the network; every robot decides over the votes it holds
-        let mut decisions = Vec::with_capacity(per_robot.len());
-        for &(me, _, _) in &per_robot {
-            let mut ballots: Vec<Ballot<'_>> = per_robot
-                .iter()
-                .filter(|(s, _, _)| *s == me || !lost(&mut loss_rng, o.faults.loss))
-                .filter_map(|(s, visibility, pr)| {
-                    pr.vote.as_deref().map(|steps| Ballot { robot: &ids[*s], visibility: *visibility, steps })
-                })
-                .collect();
-            decisions.push(decide(&mut ballots, weights).iter().map(|s| s.class).collect::<Vec<u8>>());
-        }
-        let per_robot = per_robot.into_iter().map(|(s, _, p)| (s, p)).collect();
         records.push(TickRecord { per_robot, decisions });
     }
 
     // Score now that the truth of every horizon is known.
     for (t, rec) in records.iter().enumerate() {
         let truth = &intents[t..=t + horizon];
+        let close = in_close_pair[truth[0] as usize];
         for (slot, p) in &rec.per_robot {
             let pr = &mut tallies.per_robot[*slot];
             if let Some(g) = p.gnn {
@@ -179,11 +215,17 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
             }
             if let Some(e) = &p.ego {
                 tallies.ego.add(e, truth);
+                if close {
+                    tallies.close_pair.ego.add(e, truth);
+                }
                 pr[1].add(e, truth);
                 confuse(&mut tallies.confusion_ego, e[0], truth[0]);
             }
             if let Some(c) = &p.collective {
                 tallies.collective.add(c, truth);
+                if close {
+                    tallies.close_pair.collective.add(c, truth);
+                }
                 pr[2].add(c, truth);
                 confuse(&mut tallies.confusion_collective, c[0], truth[0]);
             }
@@ -192,12 +234,19 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
             }
             if let Some(c) = &p.cvm {
                 tallies.cvm.add(c, truth);
+                if close {
+                    tallies.close_pair.cvm.add(c, truth);
+                }
             }
         }
         tallies.ticks += 1;
         for d in &rec.decisions {
             let undecided = vec![u8::MAX; horizon + 1]; // matches no class
-            tallies.team_all_ticks.add(if d.is_empty() { &undecided } else { d }, truth);
+            let d = if d.is_empty() { &undecided } else { d };
+            tallies.team_all_ticks.add(d, truth);
+            if close {
+                tallies.close_pair.team_all_ticks.add(d, truth);
+            }
         }
         let decided: Vec<&Vec<u8>> = rec.decisions.iter().filter(|d| !d.is_empty()).collect();
         if !decided.is_empty() {
@@ -206,14 +255,13 @@ pub fn episode(o: &EvalOptions, episode_seed: u64) -> Result<Tallies> {
             tallies.agreed_ticks += u64::from(all_same);
             for d in decided {
                 tallies.consensus.add(d, truth);
+                if close {
+                    tallies.close_pair.consensus.add(d, truth);
+                }
             }
         }
     }
     Ok(tallies)
-}
-
-fn lost(rng: &mut ChaCha8Rng, p: f64) -> bool {
-    p > 0.0 && rng.gen::<f64>() < p
 }
 
 /// A stuck camera: once it has seen the worker, it keeps returning that frame (with the

@@ -1,30 +1,38 @@
 //! `spwi-sim eval`: the paper's tables from held-out simulated episodes, computed by the
-//! agent's own pipeline code (graph, models, window, vote, consensus — called as a
-//! library, not re-implemented), plus the two baselines and the fault studies.
+//! daemon's own decision engine — N `Engine`s on a virtual clock behind an in-memory
+//! bus with the fault model — plus the ego-GRU and the two baselines beside them, and
+//! the fault studies.
 //!
-//! - `robot.rs`: one robot's pipeline and the baselines; `cvm.rs`: the constant-velocity model;
-//! - `fleet.rs`: N robots in lock step over one episode, message loss, dropouts, stuck cameras;
+//! - `bus.rs`: the engines' network (delay, loss, leaving robots), deadlines as polls;
+//! - `observers.rs`: the ego-GRU and the baselines; `cvm.rs`: the constant-velocity model;
+//! - `fleet.rs`: one episode — the world's frames in, the engines' votes and decisions scored;
 //! - `score.rs`: tallies and accuracies; `studies.rs`: `--all` and docs/RESULTS.md;
 //!   `plots.rs`: the PNG figures of `--plots`.
 //!
 //! Held-out honesty: the episode seeds evaluated are checked against the training
 //! episodes recorded in the model set's manifest, and refused if any is shared.
+//!
+//! Statistics: episodes are independent draws, ticks of one episode are not, so every
+//! figure carries a 95 % bootstrap interval from resampling whole episodes
+//! ([`score::estimate`]). Episodes run on every core; the figures do not depend on how
+//! many (each episode's randomness is its own, and the tallies are pooled in order).
 
+pub mod bus;
 pub mod cvm;
 pub mod fleet;
+pub mod observers;
 pub mod plots;
-pub mod robot;
 pub mod score;
 pub mod studies;
 
 use crate::dataset::episode_seed;
-use crate::layout::Layout;
-use crate::world::Scenario;
 use anyhow::{bail, Context, Result};
-use score::{Accuracy, Confusion};
+use score::{estimate, Accuracy, Confusion, Tally};
 use serde::Serialize;
 use spwi_agent::manifest::Manifest;
 use spwi_agent::model::ModelSet;
+use spwi_world::generate::NamedLayout;
+use spwi_world::world::Scenario;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -32,6 +40,8 @@ use std::time::Instant;
 
 /// Default evaluation seed: far from the training seeds (10 N + scenario).
 pub const DEFAULT_SEED: u64 = 1000;
+/// Episodes per configuration by default: ±2-3 points at 95 % on one configuration.
+pub const DEFAULT_EPISODES: u32 = 300;
 
 /// What goes wrong in the fleet during an evaluation.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
@@ -40,6 +50,9 @@ pub struct Faults {
     pub dropouts: usize,
     /// Probability that any one message between two robots is lost.
     pub loss: f64,
+    /// Mean delay of a message between two robots, ms (loopback-like 0.5 ms when
+    /// smaller; every message takes this plus up to as much again).
+    pub delay_ms: f64,
     /// Robots (the lowest slots) whose camera is stuck on an old frame that shows the
     /// worker: confident, plausible, wrong.
     pub faulty: usize,
@@ -56,8 +69,10 @@ pub struct EvalOptions {
     pub scenario: Scenario,
     pub robots: usize,
     pub models: Arc<ModelSet>,
-    pub layout: Layout,
-    pub layout_name: String,
+    /// Episode e runs on floor e mod floors.len().
+    pub floors: Vec<NamedLayout>,
+    /// How the floors were named (`factory.toml (built in)`, `heldout:0..50`, a file).
+    pub floors_name: String,
     pub episodes: u32,
     pub seed: u64,
     /// Ticks per episode (10 per second).
@@ -85,13 +100,16 @@ pub struct Report {
     pub ticks_per_episode: u32,
     pub seed: u64,
     pub model_set: String,
-    pub layout: String,
+    pub floors: String,
     pub faults: Faults,
     /// gnn (t only), ego, collective, consensus (collective votes + consensus, on the
     /// ticks some robot decided), team_all_ticks (the same decision over every tick, no
     /// decision counting as wrong), cvm, cnn1d. Each model is scored on the ticks where
     /// it predicts: a robot's models when it sees the worker.
     pub models: BTreeMap<&'static str, Accuracy>,
+    /// The same models on the ticks where the worker heads to a station of a close
+    /// pair (work spots within 3.5 m); absent when no floor has one.
+    pub close_pair: BTreeMap<&'static str, Accuracy>,
     pub per_robot: Vec<PerRobot>,
     /// Share of decided ticks on which every live robot decided the same class for t.
     pub agreement: f64,
@@ -137,32 +155,38 @@ pub fn check_held_out(manifest: &Manifest, seed: u64, episodes: u32) -> Result<(
 /// Runs one evaluation.
 pub fn run(o: &EvalOptions) -> Result<Report> {
     check_held_out(&o.models.manifest, o.seed, o.episodes)?;
-    let started = Instant::now();
-    let mut all = fleet::Tallies::default();
-    for e in 0..o.episodes {
-        all.merge(&fleet::episode(o, episode_seed(o.seed, e))?);
+    if o.floors.is_empty() {
+        bail!("no floor to evaluate on");
     }
+    let started = Instant::now();
+    let episodes = run_episodes(o)?;
     let seconds = started.elapsed().as_secs_f64();
+    let mut all = fleet::Tallies::default();
+    episodes.iter().for_each(|e| all.merge(e));
+    let of = |f: &dyn Fn(&fleet::Tallies) -> &Tally| estimate(&episodes.iter().map(|e| *f(e)).collect::<Vec<_>>());
     let m = &o.models.manifest;
     let mut models = BTreeMap::new();
-    models.insert("gnn", Accuracy { t: all.gnn.accuracy().t, future: None });
-    models.insert("ego", all.ego.accuracy());
-    models.insert("collective", all.collective.accuracy());
-    models.insert("consensus", all.consensus.accuracy());
-    models.insert("team_all_ticks", all.team_all_ticks.accuracy());
-    models.insert("cvm", all.cvm.accuracy());
+    models.insert("gnn", of(&|e| &e.gnn));
+    models.insert("ego", of(&|e| &e.ego));
+    models.insert("collective", of(&|e| &e.collective));
+    models.insert("consensus", of(&|e| &e.consensus));
+    models.insert("team_all_ticks", of(&|e| &e.team_all_ticks));
+    models.insert("cvm", of(&|e| &e.cvm));
     if m.models.cnn1d.is_some() {
-        models.insert("cnn1d", all.cnn1d.accuracy());
+        models.insert("cnn1d", of(&|e| &e.cnn1d));
     }
-    let per_robot = all
-        .per_robot
-        .iter()
-        .enumerate()
-        .map(|(slot, [g, e, c])| PerRobot {
-            robot: format!("r{slot}"),
-            gnn: g.accuracy().t,
-            ego: e.accuracy(),
-            collective: c.accuracy(),
+    let mut close_pair = BTreeMap::new();
+    if all.close_pair.team_all_ticks.samples() > 0 {
+        close_pair.insert("ego", of(&|e| &e.close_pair.ego));
+        close_pair.insert("collective", of(&|e| &e.close_pair.collective));
+        close_pair.insert("consensus", of(&|e| &e.close_pair.consensus));
+        close_pair.insert("team_all_ticks", of(&|e| &e.close_pair.team_all_ticks));
+        close_pair.insert("cvm", of(&|e| &e.close_pair.cvm));
+    }
+    let per_robot = (0..all.per_robot.len())
+        .map(|slot| {
+            let model = |k: usize| of(&|e| e.per_robot.get(slot).map_or(&EMPTY, |r| &r[k]));
+            PerRobot { robot: format!("r{slot}"), gnn: model(0).t, ego: model(1), collective: model(2) }
         })
         .collect();
     Ok(Report {
@@ -175,9 +199,10 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         ticks_per_episode: o.ticks,
         seed: o.seed,
         model_set: m.name.clone(),
-        layout: o.layout_name.clone(),
+        floors: o.floors_name.clone(),
         faults: o.faults.clone(),
         models,
+        close_pair,
         per_robot,
         agreement: if all.decided_ticks == 0 { 0.0 } else { all.agreed_ticks as f64 / all.decided_ticks as f64 },
         coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
@@ -186,6 +211,37 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         seconds,
         per_frame_us: seconds * 1e6 / all.frames.max(1) as f64,
     })
+}
+
+static EMPTY: Tally = Tally::EMPTY;
+
+/// Every episode's tallies, in episode order, computed on every core.
+fn run_episodes(o: &EvalOptions) -> Result<Vec<fleet::Tallies>> {
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, o.episodes.max(1) as usize);
+    let done: Vec<Result<Vec<(u32, fleet::Tallies)>>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..workers)
+            .map(|w| {
+                s.spawn(move || {
+                    (w as u32..o.episodes)
+                        .step_by(workers)
+                        .map(|e| {
+                            let floor = &o.floors[e as usize % o.floors.len()];
+                            fleet::episode(o, &floor.layout, episode_seed(o.seed, e))
+                                .with_context(|| format!("episode {e} on floor {}", floor.name))
+                                .map(|t| (e, t))
+                        })
+                        .collect()
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().expect("an evaluation worker panicked")).collect()
+    });
+    let mut episodes = Vec::with_capacity(o.episodes as usize);
+    for d in done {
+        episodes.extend(d?);
+    }
+    episodes.sort_by_key(|(e, _)| *e);
+    Ok(episodes.into_iter().map(|(_, t)| t).collect())
 }
 
 /// The model set under `root` for W, H and frames: `default` if it matches, else the
@@ -217,30 +273,42 @@ pub fn find_model_set(root: &Path, window: usize, horizon: usize, frames: Option
 pub fn print(r: &Report) {
     let pct = |v: f64| format!("{:5.1}", 100.0 * v);
     println!(
-        "scenario {} · {} robots · {} ticks ({} frames) → {} ahead · model set {} · layout {} · {} episodes × {} ticks, seed {}",
+        "scenario {} · {} robots · {} ticks ({} frames) → {} ahead · model set {} · floors {} · {} episodes × {} ticks, seed {}",
         r.scenario,
         r.robots,
         r.window,
         r.frames,
         r.horizon,
         r.model_set,
-        r.layout,
+        r.floors,
         r.episodes,
         r.ticks_per_episode,
         r.seed
     );
     if r.faults != Faults::default() {
         println!(
-            "faults: {} dropping out half-way, {:.0}% messages lost, {} stuck cameras",
+            "faults: {} dropping out half-way, {:.0}% messages lost, {} stuck cameras, {} ms delay",
             r.faults.dropouts,
             100.0 * r.faults.loss,
-            r.faults.faulty
+            r.faults.faulty,
+            r.faults.delay_ms
         );
     }
-    println!("  {:<12} {:>7} {:>10}", "model", "at t %", "t+1..H %");
-    for name in ["gnn", "ego", "collective", "consensus", "team_all_ticks", "cvm", "cnn1d"] {
+    let ci = |a: &Accuracy| format!("{} [{}–{}]", pct(a.t), pct(a.t_ci95[0]), pct(a.t_ci95[1]));
+    let ci_future = |a: &Accuracy| match (a.future, a.future_ci95) {
+        (Some(f), Some([lo, hi])) => format!("{} [{}–{}]", pct(f), pct(lo), pct(hi)),
+        _ => "–".into(),
+    };
+    println!("  {:<15} {:>21} {:>21}   (95 % CI by episode)", "model", "at t %", "t+1..H %");
+    for name in ["team_all_ticks", "gnn", "ego", "collective", "consensus", "cvm", "cnn1d"] {
         if let Some(a) = r.models.get(name) {
-            println!("  {:<12} {:>7} {:>10}", name, pct(a.t), a.future.map(pct).unwrap_or_else(|| "–".into()));
+            println!("  {:<15} {:>21} {:>21}", name, ci(a), ci_future(a));
+        }
+    }
+    if !r.close_pair.is_empty() {
+        println!("  heading to a station of a close pair:");
+        for (name, a) in &r.close_pair {
+            println!("    {:<13} {:>21} {:>21}", name, ci(a), ci_future(a));
         }
     }
     for p in &r.per_robot {
@@ -279,9 +347,9 @@ mod tests {
             scenario: Scenario::Dynamic,
             robots: 3,
             models,
-            layout: Layout::default_layout(),
-            layout_name: "test".into(),
-            episodes: 2,
+            floors: vec![NamedLayout { name: "test".into(), layout: spwi_world::layout::Layout::default_layout() }],
+            floors_name: "test".into(),
+            episodes: 3,
             seed: 5,
             ticks: 60,
             faults,
@@ -298,7 +366,7 @@ mod tests {
     #[test]
     fn the_same_seed_gives_the_same_figures() {
         let m = fixture();
-        let faults = Faults { loss: 0.2, dropouts: 1, faulty: 1 };
+        let faults = Faults { loss: 0.2, dropouts: 1, faulty: 1, delay_ms: 5.0 };
         let a = run(&options(m.clone(), faults.clone())).unwrap();
         let b = run(&options(m, faults)).unwrap();
         assert_eq!(without_timings(&a), without_timings(&b));
@@ -356,6 +424,6 @@ mod tests {
         let mut t = score::Tally::default();
         t.add(&[d[0].class], &[1]);
         t.add(&[2], &[1]);
-        assert_eq!(t.accuracy().t, 0.5);
+        assert_eq!(estimate(&[t]).t, 0.5);
     }
 }

@@ -1,5 +1,5 @@
 //! `spwi-sim eval --plots DIR`: the studies as PNG figures (plotters, bitmap backend):
-//! accuracy against the number of robots, the time horizons (worst and best seed),
+//! accuracy against the number of robots, the time horizons (with their 95 % intervals),
 //! the temporal resolution, and the confusion matrices at t.
 //!
 //! Text needs a TrueType font; plotters is built without system-font lookup, so the
@@ -154,24 +154,23 @@ pub fn write_all(st: &Studies, dir: &Path) -> Result<Vec<PathBuf>> {
     let horizons = dir.join("horizons.png");
     let mut series = Vec::new();
     for robots in [1, 3] {
-        for (label, pick) in [("worst", f64::min as fn(f64, f64) -> f64), ("best", f64::max)] {
-            let points: Vec<(f64, f64)> = st
-                .horizons
-                .chunks(3)
-                .filter(|c| c[0].robots == robots)
-                .map(|c| {
-                    let v = c
-                        .iter()
-                        .map(|r| pct(r, "collective", false))
-                        .fold(if label == "best" { 0.0 } else { 100.0 }, pick);
-                    (c[0].window as f64 / 10.0, v)
-                })
-                .collect();
-            series.push((
-                format!("collective t, {robots} robot{}, {label} seed", if robots > 1 { "s" } else { "" }),
-                points,
-            ));
-        }
+        let of = |f: &dyn Fn(&Report) -> f64| {
+            st.horizons
+                .iter()
+                .filter(|r| r.robots == robots)
+                .map(|r| (r.window as f64 / 10.0, f(r)))
+                .collect::<Vec<_>>()
+        };
+        let s = if robots > 1 { "s" } else { "" };
+        series.push((format!("collective t, {robots} robot{s}"), of(&|r| pct(r, "collective", false))));
+        series.push((
+            format!("  95 % CI low, {robots} robot{s}"),
+            of(&|r| r.models.get("collective").map_or(0.0, |a| 100.0 * a.t_ci95[0])),
+        ));
+        series.push((
+            format!("  95 % CI high, {robots} robot{s}"),
+            of(&|r| r.models.get("collective").map_or(0.0, |a| 100.0 * a.t_ci95[1])),
+        ));
     }
     lines(
         &horizons,

@@ -5,7 +5,9 @@
 //! angle it is seen from. Observation noise grows with distance. The worker's feature
 //! carries a noisy trace of its body orientation relative to the camera — the cue a
 //! real backbone picks up from posture. The global scene feature mixes the prototypes
-//! of what is in view with where the robot stands.
+//! of what is in view, and nothing else: no feature carries where on the floor the
+//! robot or the object stands (a probe test below checks it), so a model cannot learn
+//! one floor's places instead of the worker's relations to objects.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -30,7 +32,8 @@ pub struct Appearance {
     view: Vec<[Vec<f32>; 2]>,
     human: Vec<f32>,
     orientation: [Vec<f32>; 2],
-    place: [Vec<f32>; 2],
+    /// What every view shows besides objects (floor, walls, light): the same everywhere.
+    background: Vec<f32>,
 }
 
 impl Default for Appearance {
@@ -48,7 +51,7 @@ impl Appearance {
             view: (0..n).map(|_| [random_vector(&mut rng), random_vector(&mut rng)]).collect(),
             human: random_vector(&mut rng),
             orientation: [random_vector(&mut rng), random_vector(&mut rng)],
-            place: [random_vector(&mut rng), random_vector(&mut rng)],
+            background: random_vector(&mut rng),
         }
     }
 
@@ -56,7 +59,8 @@ impl Appearance {
         ObjectClass::ALL.iter().position(|&c| c == class).expect("every class is listed")
     }
 
-    /// An object's feature seen from `view_angle` (radians) at relative distance
+    /// An object's feature seen from `view_angle` (radians: the camera ray's direction
+    /// against the object's own facing) at relative distance
     /// `d` ∈ [0, 1] (distance / camera range); `extra_noise` for false positives.
     pub fn object(
         &self,
@@ -88,14 +92,14 @@ impl Appearance {
             .collect()
     }
 
-    /// The global feature of a view: what is in it and where it is taken from
-    /// (`place` ∈ [0, 1]², the robot's position over the floor size).
-    pub fn scene(&self, visible: &[ObjectClass], place: [f32; 2], rng: &mut ChaCha8Rng) -> Vec<f32> {
+    /// The global feature of a view: the classes in it, over a background that is the
+    /// same on every floor.
+    pub fn scene(&self, visible: &[ObjectClass], rng: &mut ChaCha8Rng) -> Vec<f32> {
         let n = visible.len().max(1) as f32;
         (0..FEATURE_DIM)
             .map(|k| {
                 let content: f32 = visible.iter().map(|&c| self.prototypes[Self::index(c)][k]).sum::<f32>() / n;
-                0.7 * content + 0.5 * (place[0] * self.place[0][k] + place[1] * self.place[1][k]) + 0.2 * gauss(rng)
+                0.7 * content + 0.3 * self.background[k] + 0.2 * gauss(rng)
             })
             .collect()
     }

@@ -1,6 +1,7 @@
 //! A simple walking skeleton: the 17 COCO keypoints (nose, eyes, ears, shoulders,
 //! elbows, wrists, hips, knees, ankles; left before right) of a person at a floor
-//! position and heading, arms and legs swinging with the gait phase when walking.
+//! position and heading, arms and legs swinging with the gait phase when walking, and
+//! the head (nose, eyes, ears) turned by its own yaw.
 
 use crate::geometry::P2;
 
@@ -26,14 +27,20 @@ const BODY: [([f32; 3], f32); 17] = [
     ([0.00, -0.12, 0.08], 0.35),  // right ankle
 ];
 
-/// World (x, y, z) of the 17 keypoints.
-pub fn keypoints(position: P2, heading: f32, gait: f32, speed: f32) -> [[f32; 3]; 17] {
+/// The first keypoints that belong to the head (nose, eyes, ears).
+const HEAD: usize = 5;
+
+/// World (x, y, z) of the 17 keypoints; `head_yaw` turns the head from the body.
+pub fn keypoints(position: P2, heading: f32, head_yaw: f32, gait: f32, speed: f32) -> [[f32; 3]; 17] {
     let stride = (speed / 1.2).clamp(0.0, 1.0) * gait.sin();
-    let (c, s) = (heading.cos(), heading.sin());
-    BODY.map(|([f, l, z], swing)| {
+    let mut out = [[0.0; 3]; 17];
+    for (k, ([f, l, z], swing)) in BODY.into_iter().enumerate() {
+        let yaw = if k < HEAD { heading + head_yaw } else { heading };
+        let (c, s) = (yaw.cos(), yaw.sin());
         let f = f + swing * stride;
-        [position[0] + f * c - l * s, position[1] + f * s + l * c, z]
-    })
+        out[k] = [position[0] + f * c - l * s, position[1] + f * s + l * c, z];
+    }
+    out
 }
 
 #[cfg(test)]
@@ -42,10 +49,13 @@ mod tests {
 
     #[test]
     fn standing_skeleton_faces_its_heading() {
-        let k = keypoints([0.0, 0.0], 0.0, 0.0, 0.0);
+        let k = keypoints([0.0, 0.0], 0.0, 0.0, 0.0, 0.0);
         assert!(k[0][0] > 0.0, "nose in front");
         assert!(k[5][1] > 0.0 && k[6][1] < 0.0, "left shoulder on the left");
-        let walking = keypoints([0.0, 0.0], 0.0, std::f32::consts::FRAC_PI_2, 1.2);
+        let walking = keypoints([0.0, 0.0], 0.0, 0.0, std::f32::consts::FRAC_PI_2, 1.2);
         assert!(walking[15][0] < 0.0 && walking[16][0] > 0.0, "feet apart mid-stride");
+        let looking_left = keypoints([0.0, 0.0], 0.0, std::f32::consts::FRAC_PI_2, 0.0, 0.0);
+        assert!(looking_left[0][1] > 0.05 && looking_left[0][0].abs() < 0.01, "nose turned left");
+        assert_eq!(looking_left[5], k[5], "shoulders stay");
     }
 }

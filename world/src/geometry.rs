@@ -28,6 +28,14 @@ pub fn unit(a: P2) -> P2 {
     }
 }
 
+/// Distance from `p` to the segment a→b.
+pub fn segment_dist(a: P2, b: P2, p: P2) -> f32 {
+    let d = sub(b, a);
+    let len2 = d[0] * d[0] + d[1] * d[1];
+    let t = if len2 < 1e-12 { 0.0 } else { (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0) };
+    dist(p, add(a, scale(d, t)))
+}
+
 /// An axis-aligned box on the floor.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Rect {
@@ -38,6 +46,27 @@ pub struct Rect {
 impl Rect {
     pub fn contains(&self, p: P2) -> bool {
         p[0] >= self.min[0] && p[0] <= self.max[0] && p[1] >= self.min[1] && p[1] <= self.max[1]
+    }
+
+    /// Whether the interiors of two boxes share some area.
+    pub fn overlaps(&self, o: &Rect) -> bool {
+        self.min[0] < o.max[0] && o.min[0] < self.max[0] && self.min[1] < o.max[1] && o.min[1] < self.max[1]
+    }
+
+    /// The area two boxes share, m².
+    pub fn overlap_area(&self, o: &Rect) -> f32 {
+        let w = self.max[0].min(o.max[0]) - self.min[0].max(o.min[0]);
+        let h = self.max[1].min(o.max[1]) - self.min[1].max(o.min[1]);
+        w.max(0.0) * h.max(0.0)
+    }
+
+    pub fn area(&self) -> f32 {
+        (self.max[0] - self.min[0]) * (self.max[1] - self.min[1])
+    }
+
+    /// Whether `o` lies inside this box whole.
+    pub fn contains_rect(&self, o: &Rect) -> bool {
+        self.contains(o.min) && self.contains(o.max)
     }
 
     pub fn inflate(&self, r: f32) -> Rect {

@@ -148,7 +148,9 @@ pub fn detect(
         if rng.gen::<f32>() < 0.02 + 0.3 * d * d + 0.35 * occ {
             continue; // missed
         }
-        let view = bearing(pose, o.position) + pose.heading;
+        // The side of the object the camera sees: the ray's direction against the
+        // object's own facing — never where on the floor either of them stands.
+        let view = bearing(pose, o.position) + pose.heading - o.yaw_deg.to_radians();
         objects.push(ObjectDetection {
             class: o.class,
             bbox: jitter(b, rng),
@@ -192,7 +194,7 @@ pub fn detect(
         if occ < 1.0 && rng.gen::<f32>() >= 0.01 + 0.2 * d * d + 0.3 * occ {
             if let Some(b) = bbox_of(cam, pose, &footprint, WORKER_HEIGHT) {
                 let keypoints: Option<Vec<f32>> =
-                    skeleton::keypoints(wk.position, wk.heading, wk.gait, norm(wk.velocity))
+                    skeleton::keypoints(wk.position, wk.heading, wk.head_yaw, wk.gait, norm(wk.velocity))
                         .iter()
                         .map(|&p| project(cam, pose, p).map(|(u, v)| [u + 2.0 * gauss(rng), v + 2.0 * gauss(rng)]))
                         .collect::<Option<Vec<_>>>()
@@ -209,8 +211,7 @@ pub fn detect(
             }
         }
     }
-    let [fw, fh] = scene.layout.floor.size;
-    let scene_feature = scene.appearance.scene(&seen_classes, [pose.position[0] / fw, pose.position[1] / fh], rng);
+    let scene_feature = scene.appearance.scene(&seen_classes, rng);
     DetectionFrame {
         robot,
         tick,

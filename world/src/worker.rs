@@ -5,7 +5,11 @@
 //! path over the corners of the obstacles (inflated by the worker's clearance) gives
 //! the next waypoint; a social-force term pushes away from nearby robots and
 //! obstacles; a step that would enter an obstacle is refused, so the worker never walks
-//! through one. Ground-truth intent is the goal station at every tick.
+//! through one. Over the last metres the worker slows down and turns its head to the
+//! station's objects, as people do before they start work.
+//!
+//! Ground-truth intent is the goal the worker has committed to: the label changes in
+//! the very tick the worker starts to turn or walk towards the new goal, not before.
 
 use crate::geometry::*;
 use crate::layout::{Layout, WORKER_CLEARANCE};
@@ -19,6 +23,13 @@ pub const SPEED: f32 = 1.2;
 pub const ARRIVED: f32 = 0.25;
 /// How long a change of goal counts as a transition, s.
 const TRANSITION_S: f32 = 2.0;
+/// Within this distance of its work spot the worker slows down, metres.
+const SLOW_RADIUS: f32 = 1.5;
+/// Within this distance the worker looks at its goal's objects, metres.
+const LOOK_RADIUS: f32 = 3.5;
+/// How far the head turns from the body, and how fast, radians (per tick).
+const HEAD_MAX: f32 = 1.2;
+const HEAD_RATE: f32 = 0.25;
 
 #[derive(Debug, Clone)]
 pub struct Worker {
@@ -33,6 +44,8 @@ pub struct Worker {
     change_at: Option<f32>,
     /// Gait phase of the walking skeleton, radians.
     pub gait: f32,
+    /// Where the head points, relative to the body's heading, radians.
+    pub head_yaw: f32,
     /// Goal changes made so far (mid-way ones).
     pub goal_changes: u32,
     /// Trips finished at their labelled station.
@@ -119,6 +132,7 @@ impl Worker {
             timer: 0.0,
             change_at: None,
             gait: 0.0,
+            head_yaw: 0.0,
             goal_changes: 0,
             arrivals: 0,
         };
@@ -141,17 +155,18 @@ impl Worker {
     /// Advances the worker by `dt` seconds among `robots` (positions, radius 0.35 m).
     pub fn step(&mut self, dt: f32, layout: &Layout, with_obstacles: bool, robots: &[P2], rng: &mut ChaCha8Rng) {
         let rects = inflated(layout, with_obstacles);
-        let spot = layout.station(self.goal).work_spot;
         match self.phase {
             WorkerPhase::Stationary => {
                 self.velocity = [0.0, 0.0];
                 self.timer -= dt;
-                if self.timer <= 0.0 {
-                    let here = self.goal;
-                    self.new_trip(layout, rng, Some(here));
-                    self.phase = WorkerPhase::Moving;
+                if self.timer > 0.0 {
+                    self.turn_head(layout);
+                    return;
                 }
-                return;
+                // Committed to the next goal: the label changes now, and so does the motion.
+                let here = self.goal;
+                self.new_trip(layout, rng, Some(here));
+                self.phase = WorkerPhase::Moving;
             }
             WorkerPhase::Transition => {
                 self.timer -= dt;
@@ -161,7 +176,7 @@ impl Worker {
             }
             WorkerPhase::Moving => {}
         }
-        let remaining = dist(self.position, spot);
+        let remaining = dist(self.position, layout.station(self.goal).work_spot);
         if remaining < ARRIVED {
             self.phase = WorkerPhase::Stationary;
             self.timer = rng.gen_range(2.0..6.0);
@@ -180,7 +195,10 @@ impl Worker {
         }
         let spot = layout.station(self.goal).work_spot;
         let waypoint = next_waypoint(self.position, spot, &rects);
-        let mut desired = scale(unit(sub(waypoint, self.position)), SPEED.min(dist(self.position, spot) / dt));
+        let remaining = dist(self.position, spot);
+        // Slow down over the last metres (never below a quarter of the pace, so it arrives).
+        let pace = SPEED * (remaining / SLOW_RADIUS).clamp(0.25, 1.0);
+        let mut desired = scale(unit(sub(waypoint, self.position)), pace.min(remaining / dt));
         // Social force: robots within 1.5 m and obstacle faces within 0.6 m push away.
         for &r in robots {
             let away = sub(self.position, r);
@@ -223,6 +241,24 @@ impl Worker {
             self.heading = self.velocity[1].atan2(self.velocity[0]);
             self.gait += norm(self.velocity) * dt * 2.0 * std::f32::consts::PI / 1.3;
         }
+        self.turn_head(layout);
+    }
+
+    /// Near its goal (or working there) the worker looks at the goal's objects;
+    /// otherwise where it walks.
+    fn turn_head(&mut self, layout: &Layout) {
+        let station = layout.station(self.goal);
+        let near = self.phase == WorkerPhase::Stationary || dist(self.position, station.work_spot) < LOOK_RADIUS;
+        let want = if near {
+            let n = station.objects.len() as f32;
+            let centre = station.objects.iter().fold([0.0, 0.0], |c, o| add(c, scale(o.position, 1.0 / n)));
+            let to = sub(centre, self.position);
+            let rel = to[1].atan2(to[0]) - self.heading;
+            rel.sin().atan2(rel.cos()).clamp(-HEAD_MAX, HEAD_MAX)
+        } else {
+            0.0
+        };
+        self.head_yaw += (want - self.head_yaw).clamp(-HEAD_RATE, HEAD_RATE);
     }
 }
 
@@ -268,5 +304,63 @@ mod tests {
             }
             assert!(w.arrivals >= 3, "seed {seed}: only {} arrivals in 300 s", w.arrivals);
         }
+    }
+
+    #[test]
+    fn slows_down_before_its_work_spot_and_looks_at_the_station() {
+        let layout = Layout::default_layout();
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let mut w = Worker::spawn(&layout, true, &mut rng);
+        let (mut far, mut near, mut looked) = (Vec::new(), Vec::new(), 0);
+        for _ in 0..3000 {
+            w.step(0.1, &layout, true, &[], &mut rng);
+            let d = dist(w.position, layout.station(w.goal).work_spot);
+            if w.phase != WorkerPhase::Stationary {
+                let speed = norm(w.velocity);
+                if d > 3.0 {
+                    far.push(speed);
+                } else if d < 0.8 {
+                    near.push(speed);
+                }
+            } else {
+                looked += usize::from(w.head_yaw.abs() > 0.05);
+            }
+        }
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        assert!(mean(&near) < 0.6 * mean(&far), "near {} vs far {}", mean(&near), mean(&far));
+        assert!(looked > 0, "the head never turned to a station's objects");
+    }
+
+    #[test]
+    fn the_label_changes_in_the_tick_the_worker_turns_to_its_new_goal() {
+        let layout = Layout::default_layout();
+        let mut checked = 0;
+        for seed in 0..8 {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            let mut w = Worker::spawn(&layout, true, &mut rng);
+            for _ in 0..3000 {
+                let (goal, velocity) = (w.goal, w.velocity);
+                w.step(0.1, &layout, true, &[], &mut rng);
+                if w.goal == goal {
+                    continue;
+                }
+                // In this very tick the motion changed towards the new goal's next waypoint.
+                let rects: Vec<Rect> = layout.obstacles.iter().map(|o| o.rect().inflate(WORKER_CLEARANCE)).collect();
+                let to = unit(sub(next_waypoint(w.position, layout.station(w.goal).work_spot, &rects), w.position));
+                // The velocity changed towards it (a turn, or braking for a U-turn), or was
+                // already headed its way.
+                let change = sub(w.velocity, velocity);
+                let towards = change[0] * to[0] + change[1] * to[1] > 0.0;
+                let headed = norm(w.velocity) > 0.05
+                    && (w.velocity[0] * to[0] + w.velocity[1] * to[1]) / norm(w.velocity) > 0.95;
+                assert!(
+                    towards || headed,
+                    "seed {seed}: label changed, motion did not: {velocity:?} -> {:?}, towards {to:?}",
+                    w.velocity
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 20, "only {checked} goal changes seen");
     }
 }

@@ -1,0 +1,200 @@
+//! The evaluation's network: N real [`Engine`]s on a virtual clock behind an in-memory
+//! bus. What one engine publishes reaches every other live engine after a delay,
+//! unless the fault model loses it on the way to that receiver; each engine's
+//! deadlines fire as [`Input::Poll`]s at the times it asks for. The decision logic is
+//! the daemon's own — nothing of the tick is rebuilt here, only the network is.
+//!
+//! On request the bus records what each engine was given and what it said, so a test
+//! can feed the same inputs to fresh engines and check they say the same: the bus
+//! changes which messages arrive and when, never what an engine makes of them.
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use spwi_agent::engine::{Engine, Input, Output};
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// How the network between the robots behaves.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Net {
+    /// Probability that a message is lost on its way to one receiver.
+    pub loss: f64,
+    /// Every message takes `delay` plus a uniform share of `jitter`.
+    pub delay: Duration,
+    pub jitter: Duration,
+}
+
+/// One engine's life on the bus: every input with its time, and every output.
+pub type Log = Vec<(Duration, Input, Vec<Output>)>;
+
+pub struct Bus {
+    engines: Vec<Engine>,
+    live: Vec<bool>,
+    /// Pending deliveries by (time, sequence number): deterministic order.
+    queue: BTreeMap<(Duration, u64), (usize, Input)>,
+    seq: u64,
+    /// The earliest Poll already queued for each engine.
+    poll_at: Vec<Option<Duration>>,
+    net: Net,
+    rng: ChaCha8Rng,
+    logs: Option<Vec<Log>>,
+}
+
+impl Bus {
+    /// A bus between `engines` (all live, each knowing the others as members); `rng`
+    /// draws the losses and delays.
+    pub fn new(engines: Vec<Engine>, net: Net, rng: ChaCha8Rng, record: bool) -> Bus {
+        let n = engines.len();
+        let mut bus = Bus {
+            engines,
+            live: vec![true; n],
+            queue: BTreeMap::new(),
+            seq: 0,
+            poll_at: vec![None; n],
+            net,
+            rng,
+            logs: record.then(|| vec![Vec::new(); n]),
+        };
+        for me in 0..n {
+            for other in (0..n).filter(|&o| o != me) {
+                let id = bus.engines[other].config().robot.clone();
+                bus.deliver(me, Input::MemberJoined(id), Duration::ZERO);
+            }
+        }
+        bus
+    }
+
+    pub fn engine(&self, slot: usize) -> &Engine {
+        &self.engines[slot]
+    }
+
+    pub fn is_live(&self, slot: usize) -> bool {
+        self.live[slot]
+    }
+
+    /// Queues `input` for engine `to` at time `at`.
+    pub fn deliver(&mut self, to: usize, input: Input, at: Duration) {
+        self.queue.insert((at, self.seq), (to, input));
+        self.seq += 1;
+    }
+
+    /// Engine `slot` stops at `at` (a killed process: its peers see it go at once).
+    pub fn leave(&mut self, slot: usize, at: Duration) {
+        self.live[slot] = false;
+        let id = self.engines[slot].config().robot.clone();
+        let others: Vec<usize> = (0..self.engines.len()).filter(|&o| o != slot && self.live[o]).collect();
+        for other in others {
+            self.deliver(other, Input::MemberLeft(id.clone()), at);
+        }
+    }
+
+    /// Runs every delivery due before `until`, in time order; `on_output` sees each
+    /// output with the engine that made it and when.
+    pub fn run_until(&mut self, until: Duration, mut on_output: impl FnMut(usize, Duration, &Output)) {
+        while let Some(entry) = self.queue.first_entry() {
+            let (at, _) = *entry.key();
+            if at >= until {
+                break;
+            }
+            let (to, input) = entry.remove();
+            if !self.live[to] {
+                continue;
+            }
+            if matches!(input, Input::Poll) && self.poll_at[to] == Some(at) {
+                self.poll_at[to] = None;
+            }
+            let logged = self.logs.as_ref().map(|_| input.clone());
+            let outputs = self.engines[to].handle(input, at);
+            for o in &outputs {
+                on_output(to, at, o);
+                self.broadcast(to, at, o);
+            }
+            if let (Some(logs), Some(input)) = (self.logs.as_mut(), logged) {
+                logs[to].push((at, input, outputs));
+            }
+            if let Some(d) = self.engines[to].next_deadline() {
+                let d = d.max(at);
+                if self.poll_at[to].is_none_or(|p| d < p) {
+                    self.poll_at[to] = Some(d);
+                    self.deliver(to, Input::Poll, d);
+                }
+            }
+        }
+    }
+
+    fn broadcast(&mut self, from: usize, at: Duration, o: &Output) {
+        let input = match o {
+            Output::Embedding(e) => Input::Embedding(e.clone()),
+            Output::Vote(v) => Input::Vote(v.clone()),
+            Output::Decision(d) => Input::Decision(d.clone()),
+        };
+        for to in 0..self.engines.len() {
+            if to == from || !self.live[to] {
+                continue;
+            }
+            if self.net.loss > 0.0 && self.rng.gen::<f64>() < self.net.loss {
+                continue;
+            }
+            let jitter = self.net.jitter.mul_f64(self.rng.gen::<f64>());
+            self.deliver(to, input.clone(), at + self.net.delay + jitter);
+        }
+    }
+
+    /// What each engine was given and said (when built with `record`).
+    pub fn into_logs(self) -> Option<Vec<Log>> {
+        self.logs
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spwi_agent::config::TickConfig;
+    use spwi_agent::engine::EngineConfig;
+    use spwi_agent::model::{Backend, ModelSet};
+    use spwi_agent::temporal::TemporalModel;
+    use spwi_proto::{DecidedBy, RobotId};
+    use spwi_world::layout::Layout;
+    use spwi_world::world::{stream, Scenario, Stream, World};
+    use std::sync::Arc;
+
+    fn engine(slot: usize, models: &Arc<ModelSet>) -> Engine {
+        let id = RobotId::new(format!("r{slot}")).unwrap();
+        let cfg = EngineConfig::new(id, slot as u64 + 1, &TickConfig::default(), &models.manifest);
+        Engine::new(cfg, models.inference(TemporalModel::Collective).unwrap())
+    }
+
+    #[test]
+    fn engines_on_a_lossy_bus_say_what_they_say_to_the_same_inputs_given_directly() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
+        let models = ModelSet::load(&dir, Backend::Tract, None).unwrap();
+        let net = Net { loss: 0.3, delay: Duration::from_millis(1), jitter: Duration::from_millis(2) };
+        let mut bus = Bus::new(vec![engine(0, &models), engine(1, &models)], net, stream(7, Stream::Fault(1)), true);
+        let mut world = World::new(Layout::default_layout(), Scenario::Dynamic, 7, 2);
+        let ids: Vec<RobotId> = (0..2).map(|s| bus.engine(s).config().robot.clone()).collect();
+        let tick = Duration::from_millis(100);
+        let mut decisions = [0, 0];
+        for _ in 0..80 {
+            world.step();
+            let now = tick * world.tick as u32;
+            for (slot, id) in ids.iter().enumerate() {
+                bus.deliver(slot, Input::Frame(world.observe(slot, id)), now);
+            }
+            bus.run_until(now + tick, |slot, _, o| decisions[slot] += usize::from(matches!(o, Output::Decision(_))));
+        }
+        assert_eq!(decisions, [80, 80], "every robot decides every tick, whatever is lost");
+        let logs = bus.into_logs().expect("recorded");
+        let mut by_deadline = 0;
+        for (slot, log) in logs.iter().enumerate() {
+            let mut fresh = engine(slot, &models);
+            for (at, input, said) in log {
+                assert_eq!(&fresh.handle(input.clone(), *at), said, "engine {slot} at {at:?} on {input:?}");
+                by_deadline += said
+                    .iter()
+                    .filter(|o| matches!(o, Output::Decision(d) if d.decided_by == DecidedBy::Deadline))
+                    .count();
+            }
+        }
+        assert!(by_deadline > 0, "30 % loss made no robot wait for a deadline: the bus lost nothing");
+    }
+}

@@ -1,0 +1,118 @@
+//! What the evaluation runs beside each robot's engine, to compare against it: the
+//! ego-GRU (the same window rows as the engine's, without the peers' part) and the two
+//! baselines the paper compares against (the constant-velocity model and the 1D-CNN).
+//! They watch the robot's frames and its engine's embedding; they never feed the
+//! engine or the fleet.
+
+use super::cvm::{back_project, Cvm, HEAD_HEIGHT};
+use anyhow::Result;
+use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
+use spwi_agent::model::{Inference, Input, ModelSet, Runner};
+use spwi_agent::temporal::{frame_offsets, normalise_keypoints, Row, TemporalModel, Window, CNN1D_DIM};
+use spwi_agent::vote;
+use spwi_proto::{DetectionFrame, RobotPose, NUM_CLASSES};
+use spwi_world::layout::Camera;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// A robot's predictions for one tick (each `None` when it does not see the worker).
+#[derive(Debug, Clone, Default)]
+pub struct Predictions {
+    /// The engine's GCN alone.
+    pub gnn: Option<u8>,
+    /// Class for t and each future step.
+    pub ego: Option<Vec<u8>>,
+    /// The engine's vote (its collective GRU).
+    pub collective: Option<Vec<u8>>,
+    pub cnn1d: Option<Vec<u8>>,
+    pub cvm: Option<Vec<u8>>,
+}
+
+pub struct Observers {
+    graph: GraphBuilder,
+    ego: Inference,
+    ego_rows: Window,
+    cnn1d: Option<Box<dyn Runner>>,
+    /// The 1D-CNN's rows (worker feature ‖ keypoints) by tick.
+    cnn_rows: BTreeMap<u64, Vec<f32>>,
+    cvm: Cvm,
+    keypoints: Option<Vec<f32>>,
+    scratch: Vec<f32>,
+    window: usize,
+    frames: usize,
+    horizon: usize,
+}
+
+fn classes(logits: &[[f32; NUM_CLASSES]]) -> Vec<u8> {
+    logits.iter().map(|z| vote::argmax(z) as u8).collect()
+}
+
+impl Observers {
+    pub fn new(models: &Arc<ModelSet>) -> Result<Self> {
+        let m = &models.manifest;
+        Ok(Observers {
+            graph: GraphBuilder::new(m.max_nodes, m.edge_weight),
+            ego: models.inference(TemporalModel::Ego)?,
+            ego_rows: Window::with_frames(m.window, m.frames()),
+            cnn1d: m.models.cnn1d.is_some().then(|| models.runner("cnn1d")).transpose()?,
+            cnn_rows: BTreeMap::new(),
+            cvm: Cvm::new(0.1),
+            keypoints: None,
+            scratch: Vec::new(),
+            window: m.window,
+            frames: m.frames(),
+            horizon: m.horizon,
+        })
+    }
+
+    /// The robot's frame of this tick (as its engine got it): the 1D-CNN's row and the
+    /// constant-velocity model's track.
+    pub fn see(&mut self, frame: &DetectionFrame, pose: &RobotPose, camera: &Camera) {
+        let t = frame.tick;
+        self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
+        if self.cnn1d.is_some() {
+            if let Some(g) = self.graph.build(frame) {
+                let mut row = g.x[..NODE_FEATURE_DIM].to_vec(); // node 0: the worker
+                row.extend_from_slice(self.keypoints.as_deref().unwrap_or(&[]));
+                row.resize(CNN1D_DIM, 0.0);
+                self.cnn_rows.insert(t, row);
+            }
+            self.cnn_rows = self.cnn_rows.split_off(&t.saturating_sub(self.window as u64 - 1));
+        }
+        if let Some(h) = &frame.human {
+            if let Some(z) = back_project(camera, pose, (h.keypoints[0], h.keypoints[1]), HEAD_HEIGHT) {
+                self.cvm.observe(t, z);
+            }
+        }
+    }
+
+    /// With the embedding the robot's engine computed for tick `t` (`None`: the worker
+    /// was not seen), every observer's prediction.
+    pub fn predict(&mut self, t: u64, embedding: Option<Vec<f32>>, station_spots: &[[f32; 2]]) -> Result<Predictions> {
+        let seen = embedding.is_some();
+        self.ego_rows.insert(t, Row { own: embedding, peers_mean: None, keypoints: self.keypoints.take() });
+        let mut out = Predictions::default();
+        if !seen {
+            return Ok(out);
+        }
+        self.ego_rows.input(t, TemporalModel::Ego, &mut self.scratch);
+        out.ego = Some(classes(&self.ego.gru(&self.scratch)?));
+        if let Some(cnn) = self.cnn1d.as_mut() {
+            self.scratch.clear();
+            self.scratch.resize(self.frames * CNN1D_DIM, 0.0);
+            let oldest = t as i64 - (self.window as i64 - 1);
+            for (j, k) in frame_offsets(self.window, self.frames).into_iter().enumerate() {
+                let Ok(tick) = u64::try_from(oldest + k as i64) else { continue };
+                if let Some(row) = self.cnn_rows.get(&tick) {
+                    self.scratch[j * CNN1D_DIM..(j + 1) * CNN1D_DIM].copy_from_slice(row);
+                }
+            }
+            let z = cnn.run(&[Input { shape: &[1, self.frames, CNN1D_DIM], data: &self.scratch }])?;
+            let logits: Vec<[f32; NUM_CLASSES]> =
+                z[0].chunks_exact(NUM_CLASSES).map(|c| c.try_into().expect("chunk of 4")).collect();
+            out.cnn1d = Some(classes(&logits));
+        }
+        out.cvm = self.cvm.predict(station_spots).map(|k| vec![k as u8; self.horizon + 1]);
+        Ok(out)
+    }
+}

@@ -1,0 +1,118 @@
+//! The world every `spwi-sim` tool runs in, as one set of command-line arguments:
+//! which scenario, which floors (files, or generated families such as `train:0..200`),
+//! and where the cameras point. Parsed once here so every tool reads floors the same way.
+
+use anyhow::{bail, Result};
+use spwi_world::generate::{self, LayoutSource, NamedLayout};
+use spwi_world::layout::{CameraPolicy, Layout};
+use spwi_world::world::Scenario;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct WorldArgs {
+    /// 1: no obstacles, stationary robots; 2: static obstacles; 3: obstacles and moving robots.
+    #[arg(long, default_value = "3", value_parser = parse_scenario)]
+    pub scenario: Scenario,
+    /// Floors: a layout file, or a generated family `train:A..B` / `heldout:A..B`
+    /// (disjoint seed ranges); repeatable, episodes take them in turn. Default: the
+    /// built-in world/layouts/factory.toml.
+    #[arg(long = "layouts", visible_alias = "layout", value_name = "FILE|FAMILY:A..B")]
+    pub layouts: Vec<LayoutSource>,
+    /// Where the cameras point (default: each layout's own `camera.policy`).
+    #[arg(long, value_parser = parse_camera)]
+    pub camera: Option<CameraPolicy>,
+}
+
+/// The name the built-in floor is reported under.
+pub const BUILT_IN: &str = "factory.toml (built in)";
+
+impl WorldArgs {
+    /// Every floor named, with the camera policy applied.
+    pub fn floors(&self) -> Result<Vec<NamedLayout>> {
+        let mut floors = if self.layouts.is_empty() {
+            vec![NamedLayout { name: BUILT_IN.into(), layout: Layout::default_layout() }]
+        } else {
+            generate::resolve(&self.layouts)?
+        };
+        if let Some(p) = self.camera {
+            floors.iter_mut().for_each(|f| f.layout.camera.policy = p);
+        }
+        Ok(floors)
+    }
+
+    /// The one floor of a tool that runs a single world.
+    pub fn floor(&self) -> Result<NamedLayout> {
+        let mut floors = self.floors()?;
+        if floors.len() != 1 {
+            bail!("--layouts names {} floors; this tool runs one world on one floor", floors.len());
+        }
+        Ok(floors.remove(0))
+    }
+
+    /// How the floors are named on the command line, for reports.
+    pub fn describe(&self) -> String {
+        if self.layouts.is_empty() {
+            BUILT_IN.into()
+        } else {
+            self.layouts.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(" ")
+        }
+    }
+}
+
+/// Refuses a fleet larger than the floors' robot slots.
+pub fn check_robots(robots: usize, floors: &[NamedLayout]) -> Result<()> {
+    for f in floors {
+        if robots == 0 || robots > f.layout.robots.len() {
+            bail!("--robots {robots}: floor {} has slots for 1..={} robots", f.name, f.layout.robots.len());
+        }
+    }
+    Ok(())
+}
+
+pub fn parse_scenario(s: &str) -> Result<Scenario, String> {
+    s.parse::<u8>()
+        .ok()
+        .and_then(|n| Scenario::from_number(n).ok())
+        .ok_or_else(|| format!("scenario {s:?}: 1 (ideal), 2 (static obstacles) or 3 (obstacles and moving robots)"))
+}
+
+pub fn parse_camera(s: &str) -> Result<CameraPolicy, String> {
+    match s {
+        "fixed" => Ok(CameraPolicy::Fixed),
+        "track" => Ok(CameraPolicy::Track),
+        _ => Err(format!("camera policy {s:?}: \"fixed\" or \"track\"")),
+    }
+}
+
+/// `spwi-sim layout`: writes a floor to a file — a generated one, or a built-in or
+/// given one mirrored — so it can be read, rendered and edited.
+#[derive(clap::Args, Debug)]
+pub struct LayoutArgs {
+    /// Generate the floor of this generator seed (`train:N` is seed N).
+    #[arg(long, value_name = "SEED", conflicts_with = "mirror")]
+    pub generate: Option<u64>,
+    /// Mirror a floor (x → width − x): the built-in one, or FILE.
+    #[arg(long, value_name = "FILE", num_args = 0..=1, default_missing_value = "")]
+    pub mirror: Option<std::path::PathBuf>,
+    #[arg(long)]
+    pub out: std::path::PathBuf,
+}
+
+pub fn run_layout(a: &LayoutArgs) -> Result<()> {
+    let layout = match (&a.generate, &a.mirror) {
+        (Some(seed), _) => generate::layout(*seed),
+        (None, Some(p)) if p.as_os_str().is_empty() => Layout::default_layout().mirrored(),
+        (None, Some(p)) => Layout::load(p)?.mirrored(),
+        (None, None) => bail!("say what to write: --generate SEED or --mirror [FILE]"),
+    };
+    layout.validate()?;
+    std::fs::write(&a.out, layout.to_toml()).map_err(|e| anyhow::anyhow!("--out {}: {e}", a.out.display()))?;
+    println!(
+        "wrote {} ({} × {} m, {} obstacles, close pairs {:?})",
+        a.out.display(),
+        layout.floor.size[0],
+        layout.floor.size[1],
+        layout.obstacles.len(),
+        layout.close_pairs()
+    );
+    Ok(())
+}
