@@ -8,9 +8,11 @@
 #   4. train_temporal.py per model set: ego-GRU, collective-GRU (and the 1D-CNN baseline
 #      for the default set), temperature scaling, export, checks, manifest.
 #
-# Usage: models/train.sh            (all sets; ~40 min on 2 cores, see models/README.md)
+# Usage: models/train.sh            (all sets; see models/README.md for the time)
 #        SETS="default" models/train.sh
-# Settings (environment): EPISODES per scenario (300), SEED (1), SPWI_TRAIN_VENV,
+# Settings (environment): EPISODES per scenario (300), SEED (1), LAYOUTS (the floors
+# trained on: train:0..300, one episode after another on each; never the evaluation's
+# held-out family), SPWI_TRAIN_VENV,
 # SPWI_TRAIN_DATA (where the exports go, ~5 GB), MODELS_OUT (where the sets go:
 # models/), STAGE2_ONLY=1 (reuse the GCN and temporal exports already in
 # SPWI_TRAIN_DATA), CARGO_TARGET_DIR.
@@ -19,6 +21,7 @@ cd "$(dirname "$0")/.."
 
 EPISODES="${EPISODES:-300}"
 SEED="${SEED:-1}"
+LAYOUTS="${LAYOUTS:-train:0..300}"
 SETS="${SETS:-default w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
 VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
 DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
@@ -42,7 +45,7 @@ export_all() { # $1: part name, then extra dataset flags
   local part="$1"; shift
   local pids=()
   for s in 1 2 3; do
-    "$SIM" dataset --scenario "$s" --episodes "$EPISODES" --robots 4 --ticks 300 \
+    "$SIM" dataset --scenario "$s" --layouts "$LAYOUTS" --episodes "$EPISODES" --robots 4 --ticks 300 \
       --seed $((SEED * 10 + s)) --out "$DATA/$part-s$s" "$@" > "$DATA/$part-s$s.log" 2>&1 &
     pids+=($!)
     if [ "${#pids[@]}" -ge 2 ]; then wait "${pids[0]}"; pids=("${pids[@]:1}"); fi
@@ -50,6 +53,8 @@ export_all() { # $1: part name, then extra dataset flags
   for p in "${pids[@]}"; do wait "$p"; done
   tail -n 1 "$DATA"/"$part"-s*.log
 }
+
+case "$LAYOUTS" in *heldout:*) echo "LAYOUTS=$LAYOUTS: the held-out floors are the evaluation's, never trained on" >&2; exit 2 ;; esac
 
 if [ -z "${STAGE2_ONLY:-}" ]; then
   rm -rf "$DATA"; mkdir -p "$DATA"

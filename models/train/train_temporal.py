@@ -201,7 +201,8 @@ def main():
         "opset": OPSET,
         "dataset": {
             "exports": [
-                {k: ex.desc[k] for k in ("scenario", "episodes", "robots", "ticks_per_episode", "seed")} for ex in exports
+                {k: ex.desc.get(k) for k in ("scenario", "episodes", "robots", "ticks_per_episode", "seed", "layouts")}
+                for ex in exports
             ],
             "episode_seed": exports[0].desc["episode_seed"],
             "split": exports[0].desc["split"],

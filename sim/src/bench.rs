@@ -10,6 +10,8 @@
 use crate::demo::percentile;
 use anyhow::{anyhow, bail, Context, Result};
 use serde::Serialize;
+use spwi_agent::cli::init_tracing;
+use spwi_agent::config::LogFormat;
 use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
@@ -294,6 +296,48 @@ pub fn print(r: &BenchReport) {
         r.msgs_per_tick_per_robot,
         r.bytes_per_tick_per_robot
     );
+}
+
+/// The arguments of `spwi-sim bench`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=64))]
+    pub robots: u64,
+    /// How long to measure, after 2 s of warm-up (e.g. 20s).
+    #[arg(long, default_value = "20s", value_parser = crate::demo::parse_duration)]
+    pub duration: Duration,
+    /// Publish the next tick as soon as every robot decided (the maximum rate).
+    #[arg(long)]
+    pub free: bool,
+    #[arg(long, default_value = "3", value_parser = crate::world_args::parse_scenario)]
+    pub scenario: spwi_world::world::Scenario,
+    /// The spwi-agent binary (default: next to this one).
+    #[arg(long)]
+    pub agent: Option<PathBuf>,
+    /// Model set folder for the agents (default: theirs).
+    #[arg(long)]
+    pub models: Option<PathBuf>,
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// `spwi-sim bench`: parses nothing more, runs the tool.
+pub fn main(a: BenchArgs) -> Result<()> {
+    let BenchArgs { robots, duration, free, scenario, agent, models, json } = a;
+    init_tracing(LogFormat::Human);
+    let agent = match agent {
+        Some(a) => a,
+        None => std::env::current_exe()?.with_file_name("spwi-agent"),
+    };
+    let opts =
+        crate::bench::BenchOptions { robots: robots as usize, duration, free_running: free, scenario, agent, models };
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let report = rt.block_on(crate::bench::run(&opts))?;
+    crate::bench::print(&report);
+    if let Some(path) = json {
+        std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

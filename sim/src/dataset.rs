@@ -19,6 +19,7 @@
 //! `dataset.json` describes every array.
 
 use crate::npy::NpyWriter;
+use crate::world_args::{check_robots, WorldArgs};
 use anyhow::{Context, Result};
 use serde_json::json;
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
@@ -43,6 +44,8 @@ pub struct DatasetOptions {
     pub spatial_every: u32,
     /// Episode e runs on floor e mod floors.len().
     pub floors: Vec<NamedLayout>,
+    /// How the floors were named (`train:0..300`, a file): recorded in dataset.json.
+    pub layouts: String,
     /// Graph size and edge weights; from the GCN's manifest when given.
     pub max_nodes: usize,
     pub edge_weight: spwi_agent::graph::EdgeWeight,
@@ -268,8 +271,9 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         "ticks_per_episode": o.ticks,
         "seed": o.seed,
         "episode_seed": "seed * 1000003 + episode",
-        "floors": o.floors.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(),
-        "floor_of_episode": "floors[episode mod len(floors)]",
+        "layouts": o.layouts,
+        "floors": o.floors.len(),
+        "floor_of_episode": "the (episode mod floors)-th floor the layouts name",
         "split": "by episode index: first 60% train (0), next 20% validation (1), last 20% test (2)",
         "classes": spwi_proto::STATION_NAMES,
         "max_nodes": n,
@@ -322,6 +326,99 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     Ok((samples, rows))
 }
 
+/// The arguments of `spwi-sim dataset`.
+#[derive(clap::Args, Debug)]
+pub struct DatasetArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[arg(long, default_value_t = 100)]
+    pub episodes: u32,
+    #[arg(long, default_value_t = 4)]
+    pub robots: usize,
+    /// Ticks per episode (10 per second).
+    #[arg(long, default_value_t = 300)]
+    pub ticks: u32,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Keep the graph of every Nth tick per robot for the spatial part.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
+    pub spatial_every: u32,
+    /// The GCN that computes the temporal part's embeddings (via the agent's code):
+    /// a model set folder, or a lone gcn .onnx file.
+    #[arg(long, value_name = "MODEL_SET_OR_ONNX")]
+    pub gcn: Option<PathBuf>,
+    /// Graph size, unless --gcn names a model set (then: its manifest's).
+    #[arg(long, default_value_t = 16)]
+    pub max_nodes: usize,
+    /// Edge weights, unless --gcn names a model set (then: its manifest's).
+    #[arg(long, default_value = "proximity", value_parser = parse_edge_weight)]
+    pub edge_weight: spwi_agent::graph::EdgeWeight,
+    /// Also write the worker node's 1024-d feature per row (the 1D-CNN baseline's input).
+    #[arg(long)]
+    pub human_features: bool,
+}
+
+/// `spwi-sim dataset`: parses nothing more, runs the tool.
+pub fn main(a: DatasetArgs) -> Result<()> {
+    let DatasetArgs {
+        world,
+        episodes,
+        robots,
+        ticks,
+        seed,
+        out,
+        spatial_every,
+        gcn,
+        max_nodes,
+        edge_weight,
+        human_features,
+    } = a;
+    let floors = world.floors()?;
+    check_robots(robots, &floors)?;
+    if episodes == 0 || ticks == 0 {
+        anyhow::bail!("--episodes and --ticks must be at least 1");
+    }
+    let (gcn, max_nodes, edge_weight) = match gcn {
+        Some(dir) if dir.is_dir() => {
+            let m = spwi_agent::manifest::Manifest::load(&dir)?;
+            (Some(dir.join(&m.models.gcn.file)), m.max_nodes, m.edge_weight)
+        }
+        file => (file, max_nodes, edge_weight),
+    };
+    if !(1..=256).contains(&max_nodes) {
+        anyhow::bail!("--max-nodes {max_nodes}: must be within 1..=256");
+    }
+    let started = std::time::Instant::now();
+    let (samples, rows) = crate::dataset::export(&crate::dataset::DatasetOptions {
+        scenario: world.scenario,
+        episodes,
+        robots,
+        ticks,
+        seed,
+        out: out.clone(),
+        spatial_every,
+        floors,
+        layouts: world.describe(),
+        max_nodes,
+        edge_weight,
+        gcn,
+        human_features,
+    })?;
+    println!(
+        "wrote {} ({samples} graph samples, {rows} temporal rows) in {:.1} s",
+        out.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn parse_edge_weight(s: &str) -> Result<spwi_agent::graph::EdgeWeight, String> {
+    serde_json::from_value(serde_json::Value::String(s.to_owned()))
+        .map_err(|_| format!("unknown edge weight {s:?}; use \"proximity\" or \"distance\""))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -337,6 +434,7 @@ mod tests {
             out: dir.to_owned(),
             spatial_every: 2,
             floors: vec![NamedLayout { name: "test".into(), layout: spwi_world::layout::Layout::default_layout() }],
+            layouts: "test".into(),
             max_nodes: 16,
             edge_weight: spwi_agent::graph::EdgeWeight::Proximity,
             gcn,

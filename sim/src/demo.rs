@@ -5,9 +5,12 @@
 //! while it runs, so membership changes can be watched.
 
 use crate::service::{self, WorldOptions};
+use crate::world_args::WorldArgs;
 use anyhow::{anyhow, Context, Result};
 use serde::Serialize;
+use spwi_agent::cli::{init_tracing, spawn_signal_handler};
 use spwi_agent::config::AgentConfig;
+use spwi_agent::config::LogFormat;
 use spwi_agent::daemon::{self, Options};
 use spwi_agent::model::ModelSet;
 use spwi_agent::zenoh_config;
@@ -16,6 +19,7 @@ use spwi_proto::*;
 use spwi_world::layout::Layout;
 use spwi_world::world::Scenario;
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
@@ -408,6 +412,74 @@ pub fn parse_duration(s: &str) -> Result<Duration, String> {
         return Err(format!("{s:?}: must be within 0 s and 24 h"));
     }
     Ok(Duration::from_secs_f64(secs))
+}
+
+/// The arguments of `spwi-sim demo`.
+#[derive(clap::Args, Debug)]
+pub struct DemoArgs {
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=8))]
+    pub robots: u64,
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// How long to run (e.g. 60s, 2m).
+    #[arg(long, default_value = "60s", value_parser = crate::demo::parse_duration)]
+    pub duration: Duration,
+    /// Stop one agent after this long, to watch the fleet shrink.
+    #[arg(long, value_parser = crate::demo::parse_duration)]
+    pub kill_after: Option<Duration>,
+    /// Start one more agent after this long, to watch it join.
+    #[arg(long, value_parser = crate::demo::parse_duration)]
+    pub join_after: Option<Duration>,
+    /// Model set folder (default: the agent's default).
+    #[arg(long)]
+    pub models: Option<PathBuf>,
+    /// Write the summary as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// No live view, only the summary.
+    #[arg(long)]
+    pub quiet: bool,
+    /// Serve a live page (floor map, votes, decision, accuracy) on this address.
+    #[arg(long, value_name = "ADDR")]
+    pub http: Option<std::net::SocketAddr>,
+}
+
+/// `spwi-sim demo`: parses nothing more, runs the tool.
+pub fn main(a: DemoArgs) -> Result<()> {
+    let DemoArgs { robots, world, seed, duration, kill_after, join_after, models, json, quiet, http } = a;
+    init_tracing(LogFormat::Human);
+    let mut agent = spwi_agent::config::AgentConfig::load(None)?;
+    if let Some(m) = models {
+        agent.models.dir = m;
+    }
+    let set = spwi_agent::daemon::load_models(&agent)?;
+    let opts = crate::demo::DemoOptions {
+        robots: robots as usize,
+        scenario: world.scenario,
+        seed,
+        duration,
+        kill_after,
+        join_after,
+        layout: world.floor()?.layout,
+        agent,
+        view: !quiet,
+        http,
+        on_http: None,
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let summary = rt.block_on(async {
+        let (tx, rx) = tokio::sync::watch::channel(false);
+        spawn_signal_handler(tx);
+        crate::demo::run(opts, set, rx).await
+    })?;
+    println!("\n{}", serde_json::to_string_pretty(&summary)?);
+    if let Some(path) = json {
+        std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+            .map_err(|e| anyhow::anyhow!("--json {}: {e}", path.display()))?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
-//! cli.rs        the `spwi-sim` command line
+//! cli.rs        the `spwi-sim` command line: a dispatch table; each tool has its Args and main
 //! dataset.rs    `spwi-sim dataset`: training data (.npy), graphs built by the agent's code
 //! eval/         `spwi-sim eval`: the paper's tables on held-out episodes, the agent's code
 //! npy.rs        a streaming .npy writer
@@ -11,7 +11,8 @@
 //! bench.rs      `spwi-sim bench`: N agent processes over Zenoh; latency, CPU, memory
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
-//! world_args.rs the world every tool runs in (scenario, floors, cameras); `spwi-sim layout`
+//! world_args.rs the world every tool runs in (scenario, floors, cameras)
+//! layout.rs     `spwi-sim layout`: a generated or mirrored floor to a TOML file
 //! ```
 
 pub mod bench;
@@ -20,6 +21,7 @@ pub mod dataset;
 pub mod demo;
 pub mod demo_web;
 pub mod eval;
+pub mod layout;
 pub mod npy;
 pub mod render;
 pub mod service;

@@ -4,12 +4,14 @@
 //! station's colour, unknown classes in grey), so a person can check by eye that the
 //! world is sane. A tiny rasteriser writes the PNG; no fonts (the colours are the key).
 
+use crate::world_args::{check_robots, WorldArgs};
 use anyhow::{Context, Result};
 use spwi_proto::{DetectionFrame, RobotId};
 use spwi_world::camera::ROBOT_RADIUS;
 use spwi_world::geometry::P2;
 use spwi_world::world::World;
 use std::path::Path;
+use std::path::PathBuf;
 
 type Rgb = [u8; 3];
 const STATION: [Rgb; 4] = [[184, 134, 11], [31, 119, 180], [44, 160, 44], [214, 39, 40]];
@@ -163,6 +165,32 @@ pub fn render_tick(mut world: World, robots: usize, tick: u64, out: &Path) -> Re
         .map(|slot| Ok((slot, world.observe(slot, &RobotId::new(format!("r{slot}"))?))))
         .collect::<Result<_>>()?;
     render(&world, &frames, out)
+}
+
+/// The arguments of `spwi-sim render`.
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    #[arg(long, default_value_t = 100)]
+    pub tick: u64,
+    #[arg(long, default_value_t = 4)]
+    pub robots: usize,
+    #[arg(long, default_value = "scene.png")]
+    pub out: PathBuf,
+}
+
+/// `spwi-sim render`: parses nothing more, runs the tool.
+pub fn main(a: RenderArgs) -> Result<()> {
+    let RenderArgs { world: w, seed, tick, robots, out } = a;
+    let floor = w.floor()?;
+    check_robots(robots, std::slice::from_ref(&floor))?;
+    let world = spwi_world::world::World::new(floor.layout, w.scenario, seed, robots);
+    crate::render::render_tick(world, robots, tick, &out)?;
+    println!("wrote {}", out.display());
+    Ok(())
 }
 
 #[cfg(test)]

@@ -4,12 +4,16 @@
 //! publishes each live robot's detection frame, exactly as a detector node on that
 //! robot would, and the ground truth for scoring.
 
+use crate::world_args::WorldArgs;
 use anyhow::{anyhow, Result};
+use spwi_agent::cli::{init_tracing, spawn_signal_handler};
+use spwi_agent::config::LogFormat;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
 use spwi_world::layout::Layout;
 use spwi_world::world::{Scenario, World};
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
 use zenoh::sample::SampleKind;
@@ -108,6 +112,46 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
     }
     let _ = session.close().await;
     Ok(())
+}
+
+/// The arguments of `spwi-sim world`.
+#[derive(clap::Args, Debug)]
+pub struct WorldServiceArgs {
+    #[arg(long, default_value = "default")]
+    pub fleet: FleetId,
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Zenoh's own config file (json5).
+    #[arg(long, env = "ZENOH_CONFIG")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Zenoh setting override KEY:VALUE (VALUE in json5), repeatable.
+    #[arg(long = "cfg", value_name = "KEY:VALUE")]
+    pub cfg: Vec<String>,
+    /// Tick period in milliseconds.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+    pub tick_ms: u64,
+}
+
+/// `spwi-sim world`: parses nothing more, runs the tool.
+pub fn main(a: WorldServiceArgs) -> Result<()> {
+    let WorldServiceArgs { fleet, world, seed, zenoh_config, cfg, tick_ms } = a;
+    init_tracing(LogFormat::Human);
+    let opts = crate::service::WorldOptions {
+        fleet,
+        scenario: world.scenario,
+        seed,
+        layout: world.floor()?.layout,
+        zenoh: spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?,
+        tick: Duration::from_millis(tick_ms),
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    rt.block_on(async {
+        let (tx, rx) = tokio::sync::watch::channel(false);
+        spawn_signal_handler(tx);
+        crate::service::run(opts, rx).await
+    })
 }
 
 #[cfg(test)]

@@ -4,6 +4,8 @@
 //! it is near both stations of a close pair — and, with `--coverage`, how often some
 //! robot of a fleet of 1 to 8 sees the worker under each camera policy.
 
+use crate::world_args::{check_robots, WorldArgs};
+use anyhow::Result;
 use serde::Serialize;
 use spwi_proto::{RobotId, WorkerPhase};
 use spwi_world::generate::NamedLayout;
@@ -140,4 +142,62 @@ pub fn print_coverage(c: &[Coverage]) {
         let name = format!("{:?}", row.camera).to_lowercase();
         println!("  {:<8} {}", name, row.by_robots.iter().map(|v| format!("{:>5.1}%", 100.0 * v)).collect::<String>());
     }
+}
+
+/// The arguments of `spwi-sim stats`.
+#[derive(clap::Args, Debug)]
+pub struct StatsArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[arg(long, default_value_t = 4)]
+    pub robots: usize,
+    #[arg(long, default_value_t = 20)]
+    pub episodes: u32,
+    /// Ticks per episode (10 per second).
+    #[arg(long, default_value_t = 600)]
+    pub ticks: u32,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Instead: coverage (ticks on which some robot sees the worker) for fleets of
+    /// 1-8 robots under `fixed` and `track` cameras.
+    #[arg(long)]
+    pub coverage: bool,
+}
+
+/// `spwi-sim stats`: parses nothing more, runs the tool.
+pub fn main(a: StatsArgs) -> Result<()> {
+    let StatsArgs { world, robots, episodes, ticks, seed, json, coverage } = a;
+    let floors = world.floors()?;
+    if coverage {
+        let c = crate::stats::coverage(&floors, world.scenario, episodes, ticks, seed);
+        if json {
+            println!("{}", serde_json::to_string_pretty(&c)?);
+        } else {
+            crate::stats::print_coverage(&c);
+        }
+        return Ok(());
+    }
+    check_robots(robots, &floors)?;
+    let d = crate::stats::measure(&floors, world.scenario, robots, episodes, ticks, seed);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&d)?);
+    } else {
+        println!("scenario {} — {} episodes × {} ticks, {} robots, seed {seed}", d.scenario, episodes, ticks, robots);
+        let seen: Vec<String> = d.worker_seen.iter().map(|s| format!("{:.0}%", s * 100.0)).collect();
+        println!("  worker seen, per robot        {}", seen.join("  "));
+        println!("  no robot sees the worker      {:.1}%", d.nobody_sees_worker * 100.0);
+        println!("  detections per frame          {:.2}", d.mean_detections_per_frame);
+        println!(
+            "  phases: moving / transition / stationary   {:.0}% / {:.0}% / {:.0}%",
+            d.phase_moving * 100.0,
+            d.phase_transition * 100.0,
+            d.phase_stationary * 100.0
+        );
+        println!("  goal changes per trip         {:.2}", d.goal_changes_per_trip);
+        println!("  near both stations of a close pair  {:.1}%", d.near_close_stations * 100.0);
+    }
+    Ok(())
 }

@@ -6,7 +6,8 @@
 //! - `bus.rs`: the engines' network (delay, loss, leaving robots), deadlines as polls;
 //! - `observers.rs`: the ego-GRU and the baselines; `cvm.rs`: the constant-velocity model;
 //! - `fleet.rs`: one episode — the world's frames in, the engines' votes and decisions scored;
-//! - `score.rs`: tallies and accuracies; `studies.rs`: `--all` and docs/RESULTS.md;
+//! - `score.rs`: tallies, accuracies and their intervals; `studies.rs`: `--all` and docs/RESULTS.md;
+//! - `command.rs`: the command line of `spwi-sim eval`;
 //!   `plots.rs`: the PNG figures of `--plots`.
 //!
 //! Held-out honesty: the episode seeds evaluated are checked against the training
@@ -18,6 +19,7 @@
 //! many (each episode's randomness is its own, and the tallies are pooled in order).
 
 pub mod bus;
+pub mod command;
 pub mod cvm;
 pub mod fleet;
 pub mod observers;
@@ -140,6 +142,12 @@ pub fn check_held_out(manifest: &Manifest, seed: u64, episodes: u32) -> Result<(
         let (Some(s), Some(n)) = (ex["seed"].as_u64(), ex["episodes"].as_u64()) else {
             bail!("model set {:?}: a dataset export without seed or episodes", manifest.name);
         };
+        if let Some(l) = ex["layouts"].as_str().filter(|l| l.contains("heldout:")) {
+            bail!(
+                "model set {:?} was trained on held-out floors ({l}): no evaluation of it is held out",
+                manifest.name
+            );
+        }
         trained.extend((0..n as u32).map(|e| episode_seed(s, e)));
     }
     if let Some(e) = (0..episodes).find(|&e| trained.contains(&episode_seed(seed, e))) {
@@ -394,6 +402,12 @@ mod tests {
         let e = check_held_out(&m, 13, 10).unwrap_err().to_string();
         assert!(e.contains("was used to train"), "{e}");
         check_held_out(&m, DEFAULT_SEED, 1000).unwrap();
+        m.extra.insert(
+            "dataset".into(),
+            serde_json::json!({"exports": [{"seed": 13, "episodes": 3, "layouts": "heldout:0..9"}]}),
+        );
+        let e = check_held_out(&m, DEFAULT_SEED, 10).unwrap_err().to_string();
+        assert!(e.contains("trained on held-out floors"), "{e}");
         m.extra.remove("dataset");
         assert!(check_held_out(&m, DEFAULT_SEED, 10).unwrap_err().to_string().contains("cannot check"));
     }

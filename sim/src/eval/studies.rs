@@ -2,6 +2,7 @@
 //! beyond it, as one JSON document and as `docs/RESULTS.md` (tables beside the paper's).
 
 use super::{find_model_set, run, EvalOptions, Faults, Report};
+use crate::world_args::BUILT_IN;
 use anyhow::Result;
 use serde::Serialize;
 use spwi_agent::model::{Backend, ModelSet};
@@ -44,12 +45,15 @@ pub struct Studies {
 /// Held-out generated floors of the generalisation study.
 pub const HELDOUT_FLOORS: &str = "heldout:0..50";
 
-/// The floors of the generalisation study, beside the study floors.
-pub fn unseen_floors(camera: Option<CameraPolicy>) -> Result<Vec<(String, Vec<NamedLayout>)>> {
+/// The floors of the generalisation study, beside the study floors (`study`, left out
+/// here when it is one of them).
+pub fn unseen_floors(study: &str, camera: Option<CameraPolicy>) -> Result<Vec<(String, Vec<NamedLayout>)>> {
     let moved = Layout::parse(include_str!("../../../world/layouts/factory-moved.toml"), "factory-moved.toml")?;
     let heldout: LayoutSource = HELDOUT_FLOORS.parse().map_err(anyhow::Error::msg)?;
+    let built_in = NamedLayout { name: BUILT_IN.into(), layout: Layout::default_layout() };
     let mut sets = vec![
         (HELDOUT_FLOORS.to_owned(), generate::resolve(&[heldout])?),
+        (BUILT_IN.to_owned(), vec![built_in]),
         (
             "factory-moved.toml (two stations swapped)".to_owned(),
             vec![NamedLayout { name: "factory-moved".into(), layout: moved }],
@@ -59,6 +63,7 @@ pub fn unseen_floors(camera: Option<CameraPolicy>) -> Result<Vec<(String, Vec<Na
             vec![NamedLayout { name: "factory-mirrored".into(), layout: Layout::default_layout().mirrored() }],
         ),
     ];
+    sets.retain(|(name, _)| name != study);
     if let Some(p) = camera {
         sets.iter_mut().flat_map(|(_, f)| f.iter_mut()).for_each(|f| f.layout.camera.policy = p);
     }
@@ -125,7 +130,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
     if let Some(r) = st.scenarios.iter().find(|r| r.scenario == 3) {
         st.generalisation.push(r.clone());
     }
-    for (name, floors) in unseen_floors(s.camera)? {
+    for (name, floors) in unseen_floors(&s.floors_name, s.camera)? {
         let r = run(&EvalOptions {
             scenario: Scenario::Dynamic,
             robots: 3,
@@ -326,7 +331,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             writeln!(w, "\n## Generalisation: floors the models never saw (scenario 3, 3 robots, default set, at t)\n");
         let _ = writeln!(
             w,
-            "The shipped models were trained on one floor (`world/layouts/factory.toml`). Beside held-out episodes of that floor: held-out generated floors ({HELDOUT_FLOORS}, one episode after another on each), the same floor with two stations swapped, and the same floor mirrored (every relation kept, every place moved). A model that learned the worker's relations to objects keeps its accuracy across the columns; one that learned places does not.\n"
+            "First column: the study floors above (held-out episodes). Then floors the models never saw: held-out generated floors ({HELDOUT_FLOORS}, one episode after another on each), the built-in floor (unless it is the study floor), the built-in floor with two stations swapped, and mirrored (every relation kept, every place moved). A model that learned the worker's relations to objects keeps its accuracy across the columns; one that learned places does not. The training floors of the default set are in its manifest (`dataset.exports`).\n"
         );
         let _ = write!(w, "| model |");
         for r in &st.generalisation {

@@ -1,0 +1,166 @@
+//! `spwi-sim eval`'s command line: one configuration (a table on stdout, `--json`,
+//! `--plots`) or, with `--all`, every study and the results page.
+
+use crate::world_args::{check_robots, WorldArgs};
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+
+/// The arguments of `spwi-sim eval`.
+#[derive(clap::Args, Debug)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    pub world: WorldArgs,
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=8))]
+    pub robots: u64,
+    /// Ticks of history (selects the model set, with --horizon and --frames).
+    #[arg(long, default_value_t = 20)]
+    pub window: usize,
+    #[arg(long, default_value_t = 20)]
+    pub horizon: usize,
+    /// Frames of the window fed to the models (default: all).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// A model set folder (instead of choosing by --window/--horizon/--frames).
+    #[arg(long)]
+    pub models: Option<PathBuf>,
+    #[arg(long, default_value_t = crate::eval::DEFAULT_EPISODES, value_parser = clap::value_parser!(u32).range(1..))]
+    pub episodes: u32,
+    /// Evaluation seed; episodes the models were trained on are refused.
+    #[arg(long, default_value_t = crate::eval::DEFAULT_SEED)]
+    pub seed: u64,
+    /// Ticks per episode (10 per second).
+    #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u32).range(1..))]
+    pub ticks: u32,
+    /// Robots (highest slots) that leave half-way through each episode.
+    #[arg(long, default_value_t = 0)]
+    pub dropouts: usize,
+    /// Probability that a message between robots is lost (0-1).
+    #[arg(long, default_value_t = 0.0)]
+    pub loss: f64,
+    /// Robots (lowest slots) whose camera is stuck on a frame showing the worker.
+    #[arg(long, default_value_t = 0)]
+    pub faulty: usize,
+    /// Mean delay of a message between robots, ms (default: loopback-like, 0.5 ms).
+    #[arg(long, default_value_t = 0.0)]
+    pub delay: f64,
+    /// Write every figure as JSON to this file.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Every study (tables II-IV, robots, horizons, resolution, faults, an unseen
+    /// layout); with --markdown FILE also writes the results page.
+    #[arg(long)]
+    pub all: bool,
+    #[arg(long, requires = "all")]
+    pub markdown: Option<PathBuf>,
+    /// Write PNG figures into this folder (with --all: robots, horizons, resolution
+    /// and confusion matrices; alone: the confusion matrices).
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+}
+
+/// `spwi-sim eval`: parses nothing more, runs the tool.
+pub fn main(a: EvalArgs) -> Result<()> {
+    let EvalArgs {
+        world,
+        robots,
+        window,
+        horizon,
+        frames,
+        models,
+        episodes,
+        seed,
+        ticks,
+        dropouts,
+        loss,
+        faulty,
+        delay,
+        json,
+        all,
+        markdown,
+        plots,
+    } = a;
+    let floors = world.floors()?;
+    let robots = robots as usize;
+    check_robots(robots, &floors)?;
+    if !(0.0..=1.0).contains(&loss) {
+        anyhow::bail!("--loss {loss}: a probability, 0 to 1");
+    }
+    if !(0.0..=10_000.0).contains(&delay) {
+        anyhow::bail!("--delay {delay}: milliseconds, 0 to 10000");
+    }
+    if dropouts >= robots || faulty > robots {
+        anyhow::bail!(
+            "--dropouts {dropouts} / --faulty {faulty}: must leave at least one of the {robots} robots working"
+        );
+    }
+    let root = std::path::Path::new("models");
+    if all {
+        let settings = crate::eval::studies::Settings {
+            models_root: root.to_owned(),
+            floors,
+            floors_name: world.describe(),
+            camera: world.camera,
+            episodes,
+            seed,
+            ticks,
+        };
+        let studies = crate::eval::studies::run_all(&settings)?;
+        if let Some(path) = json {
+            std::fs::write(&path, serde_json::to_string_pretty(&studies)?)?;
+        }
+        if let Some(dir) = &plots {
+            for f in crate::eval::plots::write_all(&studies, dir)? {
+                println!("wrote {}", f.display());
+            }
+        }
+        if let Some(path) = markdown {
+            let mut command = format!("spwi-sim eval --all --episodes {episodes} --seed {seed}");
+            for l in &world.layouts {
+                command += &format!(" --layouts {l}");
+            }
+            if let Some(c) = world.camera {
+                command += &format!(" --camera {}", format!("{c:?}").to_lowercase());
+            }
+            command += &format!(" --markdown {}", path.display());
+            // Figures are linked relative to the page when they sit beside it.
+            let page_dir = path.parent().unwrap_or(std::path::Path::new(""));
+            let figures = plots.as_ref().map(|d| {
+                command += &format!(" --plots {}", d.display());
+                d.strip_prefix(page_dir).map(|p| p.to_owned()).unwrap_or_else(|_| d.clone())
+            });
+            let page = crate::eval::studies::markdown(&studies, &command, &settings, figures.as_deref());
+            std::fs::write(&path, page)?;
+            println!("wrote {}", path.display());
+        }
+        return Ok(());
+    }
+    let dir = match models {
+        Some(d) => d,
+        None => crate::eval::find_model_set(root, window, horizon, frames)?,
+    };
+    let models = spwi_agent::model::ModelSet::load(&dir, spwi_agent::model::Backend::Tract, None)?;
+    let report = crate::eval::run(&crate::eval::EvalOptions {
+        scenario: world.scenario,
+        robots,
+        models,
+        floors,
+        floors_name: world.describe(),
+        episodes,
+        seed,
+        ticks,
+        faults: crate::eval::Faults { dropouts, loss, faulty, delay_ms: delay },
+    })?;
+    crate::eval::print(&report);
+    if let Some(path) = json {
+        std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+    }
+    if let Some(dir) = plots {
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for (name, c) in &report.confusion {
+            let path = dir.join(format!("confusion_{name}.png"));
+            crate::eval::plots::confusion(&path, &format!("{name}: share of each true station"), c)?;
+            println!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
