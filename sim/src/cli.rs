@@ -25,7 +25,8 @@ enum Command {
     Demo(crate::demo::DemoArgs),
     /// Export training data (.npy arrays + dataset.json) for the models.
     Dataset(crate::dataset::DatasetArgs),
-    /// Reproduce the paper's tables on held-out episodes with the agent's own pipeline.
+    /// Reproduce the paper's tables on held-out episodes: the daemon's own engines on an
+    /// in-memory bus, every figure with its 95 % confidence interval.
     Eval(crate::eval::command::EvalArgs),
     /// Measure a fleet: the world here, N spwi-agent processes over Zenoh on loopback.
     Bench(crate::bench::BenchArgs),

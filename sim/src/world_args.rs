@@ -82,3 +82,47 @@ pub fn parse_camera(s: &str) -> Result<CameraPolicy, String> {
         _ => Err(format!("camera policy {s:?}: \"fixed\" or \"track\"")),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        world: WorldArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<WorldArgs, String> {
+        Cli::try_parse_from(std::iter::once("t").chain(args.iter().copied()))
+            .map(|c| c.world)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn floors_cameras_and_scenarios_from_the_command_line() {
+        let w = parse(&[]).unwrap();
+        assert_eq!((w.scenario, w.floors().unwrap()[0].name.as_str()), (Scenario::Dynamic, BUILT_IN));
+        let w = parse(&["--layouts", "train:0..2", "--layout", "heldout:0..1", "--camera", "track", "--scenario", "1"])
+            .unwrap();
+        let floors = w.floors().unwrap();
+        assert_eq!(floors.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(), ["train:0", "train:1", "heldout:0"]);
+        assert!(floors.iter().all(|f| f.layout.camera.policy == CameraPolicy::Track));
+        assert_eq!(w.scenario, Scenario::Ideal);
+        assert!(w.floor().unwrap_err().to_string().contains("names 3 floors"));
+        assert_eq!(w.describe(), "train:0..2 heldout:0..1");
+    }
+
+    #[test]
+    fn bad_floors_and_scenarios_are_refused_with_what_is_wrong() {
+        assert!(parse(&["--layouts", "train:5..5"]).unwrap_err().contains("holds no floor"));
+        assert!(parse(&["--scenario", "4"]).unwrap_err().contains("scenario \"4\""));
+        assert!(parse(&["--camera", "pan"]).unwrap_err().contains("\"fixed\" or \"track\""));
+        let overlapping = parse(&["--layouts", "train:0..3", "--layouts", "train:2..4"]).unwrap();
+        assert!(overlapping.floors().unwrap_err().to_string().contains("overlap"));
+        let floors = parse(&["--layouts", "heldout:0..1"]).unwrap().floors().unwrap();
+        assert!(check_robots(9, &floors).unwrap_err().to_string().contains("slots for 1..=8"));
+        check_robots(8, &floors).unwrap();
+    }
+}

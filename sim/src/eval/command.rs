@@ -46,8 +46,8 @@ pub struct EvalArgs {
     /// Write every figure as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Every study (tables II-IV, robots, horizons, resolution, faults, an unseen
-    /// layout); with --markdown FILE also writes the results page.
+    /// Every study (tables II-IV, robots, horizons, resolution, faults, floors the
+    /// models never saw); with --markdown FILE also writes the results page.
     #[arg(long)]
     pub all: bool,
     #[arg(long, requires = "all")]

@@ -130,8 +130,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let horizon = o.models.manifest.horizon;
     let mut world = World::new(layout.clone(), o.scenario, episode_seed, n);
     let spots: Vec<[f32; 2]> = (0..NUM_CLASSES as u8).map(|k| layout.station(k).work_spot).collect();
+    let pairs = layout.close_pairs();
     let in_close_pair: Vec<bool> =
-        (0..NUM_CLASSES as u8).map(|k| layout.close_pairs().iter().any(|&(a, b)| a == k || b == k)).collect();
+        (0..NUM_CLASSES as u8).map(|k| pairs.iter().any(|&(a, b)| a == k || b == k)).collect();
     let engines = (0..n).map(|slot| engine(slot, o)).collect::<Result<Vec<_>>>()?;
     let ids: Vec<RobotId> = engines.iter().map(|e| e.config().robot.clone()).collect();
     let mut observers = (0..n).map(|_| Observers::new(&o.models)).collect::<Result<Vec<_>>>()?;
