@@ -70,6 +70,16 @@ pub fn truth(fleet: &FleetId) -> String {
     format!("{ROOT}/{fleet}/world/truth")
 }
 
+/// `spwi/<fleet>/robot/*/*`: every robot topic of the fleet (observers: demo, bench).
+pub fn all_robot_topics(fleet: &FleetId) -> String {
+    format!("{ROOT}/{fleet}/robot/*/*")
+}
+
+/// `spwi/<fleet>/**`: everything the fleet says, liveliness aside (observers).
+pub fn everything(fleet: &FleetId) -> String {
+    format!("{ROOT}/{fleet}/**")
+}
+
 /// Parses `spwi/<fleet>/robot/<robot>/<topic>`; `None` for any other key, another fleet
 /// or an invalid robot id.
 pub fn parse_robot_topic(fleet: &FleetId, key: &str) -> Option<(RobotId, Topic)> {
@@ -129,5 +139,7 @@ mod tests {
         assert_eq!(parse_alive(&f, "spwi/f10/alive/a"), None);
         assert_eq!(all_alive(&f), "spwi/f1/alive/*");
         assert_eq!(truth(&f), "spwi/f1/world/truth");
+        assert_eq!(all_robot_topics(&f), "spwi/f1/robot/*/*");
+        assert_eq!(everything(&f), "spwi/f1/**");
     }
 }

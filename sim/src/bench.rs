@@ -129,7 +129,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let _agent_traffic = {
         let (seen, fleet) = (seen.clone(), fleet.clone());
         session
-            .declare_subscriber(format!("spwi/{fleet}/robot/*/*"))
+            .declare_subscriber(keys::all_robot_topics(&fleet))
             .callback(move |s| {
                 let Some((robot, topic)) = keys::parse_robot_topic(&fleet, s.key_expr().as_str()) else { return };
                 if topic == Topic::Detections {

@@ -269,7 +269,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
     let o = observed.clone();
     let f = fleet.clone();
     let _all = observer
-        .declare_subscriber(format!("spwi/{fleet}/**"))
+        .declare_subscriber(keys::everything(&fleet))
         .callback(move |s| {
             let key = s.key_expr().as_str().to_owned();
             let bytes = s.payload().to_bytes();
