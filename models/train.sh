@@ -6,7 +6,9 @@
 #   3. spwi-sim dataset --gcn gcn.onnx: the temporal rows, with the embeddings the
 #      agent's own Rust code computes from that exported GCN;
 #   4. train_temporal.py per model set: ego-GRU, collective-GRU (and the 1D-CNN baseline
-#      for the default set), temperature scaling, export, checks, manifest.
+#      for the default set), temperature scaling, export, checks, manifest. `paper` is
+#      the paper's design (rows: embeddings and keypoints); `default` adds the worker's
+#      relations to the mapped stations (agent/src/floor/); both share the GCN and data.
 #
 # Usage: models/train.sh            (all sets; see models/README.md for the time)
 #        SETS="default" models/train.sh
@@ -15,14 +17,15 @@
 # held-out family), SPWI_TRAIN_VENV,
 # SPWI_TRAIN_DATA (where the exports go, ~5 GB), MODELS_OUT (where the sets go:
 # models/), STAGE2_ONLY=1 (reuse the GCN and temporal exports already in
-# SPWI_TRAIN_DATA), CARGO_TARGET_DIR.
+# SPWI_TRAIN_DATA), GCN_FROM=models/SET (skip stage 1: take that shipped set's GCN,
+# which was trained on the same data), CARGO_TARGET_DIR.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 EPISODES="${EPISODES:-300}"
 SEED="${SEED:-1}"
 LAYOUTS="${LAYOUTS:-train:0..300}"
-SETS="${SETS:-default w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
+SETS="${SETS:-paper default w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
 VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
 DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
 OUT="$(realpath -m "${MODELS_OUT:-models}")"
@@ -58,12 +61,24 @@ case "$LAYOUTS" in *heldout:*) echo "LAYOUTS=$LAYOUTS: the held-out floors are t
 
 if [ -z "${STAGE2_ONLY:-}" ]; then
   rm -rf "$DATA"; mkdir -p "$DATA"
-  step "stage 1 data: spatial graphs, $EPISODES episodes x 3 scenarios x 4 robots"
-  export_all spatial --spatial-every 5
+  if [ -n "${GCN_FROM:-}" ]; then
+    step "stage 1: the GCN of $GCN_FROM"
+    mkdir -p "$DATA/gcn"
+    cp "$GCN_FROM/gcn.onnx" "$DATA/gcn/"
+    "$PY" - "$GCN_FROM" "$DATA/gcn" <<'PY'
+import json, sys
+src, out = sys.argv[1:]
+json.dump(json.load(open(f"{src}/reference.json"))["gcn"], open(f"{out}/gcn_reference.json", "w"))
+json.dump({**json.load(open(f"{src}/manifest.json"))["training"]["gcn"], "from": src}, open(f"{out}/gcn.json", "w"))
+PY
+  else
+    step "stage 1 data: spatial graphs, $EPISODES episodes x 3 scenarios x 4 robots"
+    export_all spatial --spatial-every 5
 
-  step "stage 1: GCN"
-  (cd models/train && "$PY" train_gcn.py --data "$DATA"/spatial-s{1,2,3} --out "$DATA/gcn" --seed "$SEED")
-  rm -rf "$DATA"/spatial-s*  # the graphs are not needed again
+    step "stage 1: GCN"
+    (cd models/train && "$PY" train_gcn.py --data "$DATA"/spatial-s{1,2,3} --out "$DATA/gcn" --seed "$SEED")
+    rm -rf "$DATA"/spatial-s*  # the graphs are not needed again
+  fi
 
   step "stage 2 data: temporal rows through the exported GCN (agent's Rust code)"
   export_all temporal --gcn "$DATA/gcn/gcn.onnx" --human-features --spatial-every 1000000
@@ -72,7 +87,8 @@ fi
 step "stage 2: temporal models"
 for set in $SETS; do
   case "$set" in
-    default)    args=(--window 20 --horizon 20 --cnn1d) ;;
+    paper)      args=(--window 20 --horizon 20) ;;
+    default)    args=(--window 20 --horizon 20 --relations --cnn1d) ;;
     w10-h10)    args=(--window 10 --horizon 10) ;;
     w30-h30)    args=(--window 30 --horizon 30) ;;
     w10-h10-f5) args=(--window 10 --horizon 10 --frames 5) ;;

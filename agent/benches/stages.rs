@@ -10,7 +10,7 @@ use spwi_agent::consensus::{self, Ballot, Weights};
 use spwi_agent::engine::{Engine, EngineConfig, Input};
 use spwi_agent::graph::GraphBuilder;
 use spwi_agent::model::{Backend, ModelSet};
-use spwi_agent::temporal::{TemporalModel, COLLECTIVE_DIM, EGO_DIM};
+use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
 use spwi_proto::*;
 use std::hint::black_box;
@@ -44,6 +44,7 @@ fn frame(tick: u64, objects: usize) -> DetectionFrame {
     DetectionFrame {
         robot: RobotId::new("bench").unwrap(),
         tick,
+        pose: Some(FloorPose { position: [2.0, 3.0], heading: 0.4 }),
         image_size: [640.0, 480.0],
         human: Some(HumanDetection {
             bbox: BBox { x: 300.0, y: 100.0, w: 50.0, h: 200.0 },
@@ -89,8 +90,8 @@ fn bench_backend(backend: Backend) {
     measure("GCN", 3_000, || {
         black_box(ego.gcn(black_box(&g)).unwrap());
     });
-    let ego_in = vec![0.1f32; m.frames() * EGO_DIM];
-    let col_in = vec![0.1f32; m.frames() * COLLECTIVE_DIM];
+    let ego_in = vec![0.1f32; m.frames() * TemporalModel::Ego.row_dim(m.row)];
+    let col_in = vec![0.1f32; m.frames() * TemporalModel::Collective.row_dim(m.row)];
     measure("ego-GRU", 3_000, || {
         black_box(ego.gru(black_box(&ego_in)).unwrap());
     });
@@ -115,6 +116,7 @@ fn bench_backend(backend: Backend) {
             decision_deadline: Duration::from_millis(60),
             weights: Weights { alpha: 0.5, beta: 0.5 },
             max_open_ticks: 64,
+            camera: Default::default(),
         },
         set.inference(TemporalModel::Collective).unwrap(),
     );
@@ -138,6 +140,9 @@ fn bench_codec() {
         tick: 7,
         embedding: Some(vec![0.5; EMBEDDING_DIM]),
         visibility: 13,
+        votes: true,
+        worker: Some(WorkerEstimate { position: [3.0, 4.0], velocity: [1.0, 0.2], covariance: [0.05, 0.01, 0.2] }),
+        landmarks: (0..4).map(|s| Landmark { station: s, position: [s as f32, 2.0], sigma: 0.4 }).collect(),
     };
     let v = VoteMsg {
         robot: f.robot.clone(),

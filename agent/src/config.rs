@@ -3,6 +3,7 @@
 //! field and the allowed range of anything out of bounds. Zenoh's own settings are not
 //! here: they stay Zenoh's (see [`crate::zenoh_config`]).
 
+use crate::floor::CameraCalibration;
 use crate::model::Backend;
 use crate::temporal::TemporalModel;
 use anyhow::{bail, Context, Result};
@@ -14,6 +15,8 @@ use std::path::{Path, PathBuf};
 #[serde(default, deny_unknown_fields)]
 pub struct AgentConfig {
     pub tick: TickConfig,
+    /// The robot's camera: what back-projection onto the floor needs.
+    pub camera: CameraCalibration,
     pub models: ModelsConfig,
     pub http: HttpConfig,
     pub log: LogConfig,
@@ -177,6 +180,9 @@ impl AgentConfig {
         }
         if !(16..=1_000_000).contains(&t.event_queue) {
             bail!("tick.event_queue = {}: must be within 16..=1000000", t.event_queue);
+        }
+        if let Some(problem) = self.camera.problem() {
+            bail!("{problem}");
         }
         Ok(())
     }

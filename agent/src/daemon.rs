@@ -77,7 +77,7 @@ pub async fn run(
     config.validate()?;
     let instance = random_instance();
     let m = &models.manifest;
-    let engine_config = EngineConfig::new(robot.clone(), instance, &config.tick, m);
+    let engine_config = EngineConfig::new(robot.clone(), instance, &config.tick, &config.camera, m);
     let mut recorder = match &record {
         Some(path) => {
             Some(Recorder::create(path, &RecordedConfig { engine: engine_config.clone(), model_set: m.name.clone() })?)

@@ -6,12 +6,13 @@
 //! One tick, as this robot lives it:
 //!
 //! ```text
-//! frame ─► graph ─► GCN ─► Embedding out            (or Embedding{None}: worker unseen)
+//! frame ─► graph ─► GCN ─► Embedding out  (with the floor track and landmarks; says
+//!                                          whether this robot will vote for the tick)
 //!            peers' embeddings for the tick arrive
 //! all active peers' embeddings in, or embedding_wait passed
 //!       ─► window row (own ‖ mean(peers) ‖ keypoints) ─► GRU ─► Vote out
 //!            peers' votes arrive
-//! a vote from every active member that sees the worker, or decision_deadline passed
+//! a vote from every active member that said it votes, or decision_deadline passed
 //!       ─► consensus ─► Decision out
 //! ```
 //!
@@ -22,10 +23,11 @@
 //! so a peer that joins never stalls a tick, and one that leaves is not waited for.
 
 use crate::consensus::{self, Ballot, Weights};
+use crate::floor::{self, CameraCalibration, FloorView, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
-use crate::temporal::{self, Row, TemporalModel, Window};
+use crate::temporal::{self, Row, RowLayout, TemporalModel, Window};
 use crate::vote;
 use spwi_proto::*;
 use std::collections::{BTreeMap, BTreeSet};
@@ -45,6 +47,9 @@ pub struct EngineConfig {
     pub weights: Weights,
     /// Most ticks open at once; the oldest is dropped beyond.
     pub max_open_ticks: usize,
+    /// The camera, for back-projecting detections onto the floor.
+    #[serde(default)]
+    pub camera: CameraCalibration,
 }
 
 impl EngineConfig {
@@ -55,6 +60,7 @@ impl EngineConfig {
         robot: RobotId,
         instance: u64,
         tick: &crate::config::TickConfig,
+        camera: &CameraCalibration,
         manifest: &crate::manifest::Manifest,
     ) -> Self {
         EngineConfig {
@@ -68,6 +74,7 @@ impl EngineConfig {
                 beta: tick.beta.unwrap_or(manifest.consensus.beta),
             },
             max_open_ticks: tick.max_open_ticks,
+            camera: camera.clone(),
         }
     }
 }
@@ -103,6 +110,10 @@ struct Own {
     /// window at the vote step.
     embedding: Option<Vec<f32>>,
     keypoints: Option<Vec<f32>>,
+    /// Our own track's estimate of the worker for this tick.
+    worker: Option<WorkerEstimate>,
+    /// We vote for this tick: we see the worker, or (relation rows) we track it.
+    will_vote: bool,
     /// The vote step ran: the window row is in and, if the worker was seen, we voted.
     vote_step_done: bool,
 }
@@ -113,6 +124,10 @@ struct Tick {
     own: Option<Own>,
     /// Peers' embedding messages: `None` inside means "does not see the worker".
     embeddings: BTreeMap<RobotId, Option<Vec<f32>>>,
+    /// Peers' estimates of the worker for the tick.
+    workers: BTreeMap<RobotId, WorkerEstimate>,
+    /// Peers that said they will not vote for the tick.
+    abstaining: BTreeSet<RobotId>,
     votes: BTreeMap<RobotId, VoteMsg>,
     /// Peers' decisions that arrived before ours: their class at t.
     peer_decisions: Vec<Option<u8>>,
@@ -120,7 +135,15 @@ struct Tick {
 
 impl Tick {
     fn new(started: Duration) -> Self {
-        Tick { started, own: None, embeddings: BTreeMap::new(), votes: BTreeMap::new(), peer_decisions: Vec::new() }
+        Tick {
+            started,
+            own: None,
+            embeddings: BTreeMap::new(),
+            workers: BTreeMap::new(),
+            abstaining: BTreeSet::new(),
+            votes: BTreeMap::new(),
+            peer_decisions: Vec::new(),
+        }
     }
 }
 
@@ -132,6 +155,8 @@ pub struct Engine {
     inference: Inference,
     graph: GraphBuilder,
     window: Window,
+    row_layout: RowLayout,
+    floor: FloorView,
     scratch: Vec<f32>,
     temperature: f32,
     /// Live peers per liveliness (never ourselves).
@@ -152,13 +177,17 @@ impl Engine {
     pub fn new(cfg: EngineConfig, inference: Inference) -> Self {
         let m = &inference.set().manifest;
         let graph = GraphBuilder::new(m.max_nodes, m.edge_weight);
-        let window = Window::with_frames(m.window, m.frames());
+        let window = Window::with_frames(m.window, m.frames(), m.row);
+        let row_layout = m.row;
         let temperature = inference.set().temperature(cfg.temporal);
+        let floor = FloorView::new(cfg.camera.clone());
         Engine {
             cfg,
             inference,
             graph,
             window,
+            row_layout,
+            floor,
             scratch: Vec::new(),
             temperature,
             live: BTreeSet::new(),
@@ -184,6 +213,11 @@ impl Engine {
         m
     }
 
+    /// What this robot knows on the floor: its track and its own and team maps.
+    pub fn floor(&self) -> &FloorView {
+        &self.floor
+    }
+
     /// The spatial-only prediction (GCN logits) for our frame of `tick`, if it showed
     /// the worker: what the evaluation scores as the GNN alone.
     pub fn spatial_logits(&self, tick: u64) -> Option<[f32; NUM_CLASSES]> {
@@ -207,7 +241,17 @@ impl Engine {
         match input {
             Input::Frame(f) => self.on_frame(f, now, &mut out),
             Input::Embedding(e) => {
+                if e.robot != self.cfg.robot {
+                    // Where a peer saw station objects stays true after its tick.
+                    self.floor.add_peer_landmarks(&e.landmarks);
+                }
                 if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
+                    if let Some(w) = e.worker {
+                        tick.workers.insert(e.robot.clone(), w);
+                    }
+                    if !e.votes {
+                        tick.abstaining.insert(e.robot.clone());
+                    }
                     tick.embeddings.insert(e.robot.clone(), e.embedding);
                     self.advance(e.tick, now, &mut out);
                 }
@@ -268,15 +312,23 @@ impl Engine {
         };
         let keypoints = f.human.as_ref().map(|h| temporal::normalise_keypoints(&h.keypoints, f.image_size));
         let visibility = f.visibility();
+        let (worker, landmarks) = self.floor.observe(&f);
+        // A set that reads relations votes from the worker's track while it is fresh:
+        // the team keeps an answer through a few frames in which nobody sees the worker.
+        let will_vote = embedding.is_some() || (self.row_layout == RowLayout::Relations && worker.is_some());
         out.push(Output::Embedding(EmbeddingMsg {
             robot: self.cfg.robot.clone(),
             instance: self.cfg.instance,
             tick: f.tick,
             embedding: embedding.clone(),
             visibility,
+            votes: will_vote,
+            worker,
+            landmarks,
         }));
         let tick = self.open_tick(f.tick, now);
-        tick.own = Some(Own { arrived: now, visibility, embedding, keypoints, vote_step_done: false });
+        tick.own =
+            Some(Own { arrived: now, visibility, embedding, keypoints, worker, will_vote, vote_step_done: false });
         self.advance(f.tick, now, out);
     }
 
@@ -337,7 +389,7 @@ impl Engine {
             }
         }
 
-        // Phase 2: the decision, once every active member that sees the worker voted.
+        // Phase 2: the decision, once every active member that said it votes voted.
         let tick = &self.open[&t];
         let Some(own) = &tick.own else {
             if decision_due {
@@ -348,10 +400,8 @@ impl Engine {
         if !own.vote_step_done {
             return;
         }
-        let all_voted = expected_peers
-            .iter()
-            .filter(|r| !matches!(tick.embeddings.get(*r), Some(None)))
-            .all(|r| tick.votes.contains_key(r));
+        let all_voted =
+            expected_peers.iter().filter(|r| !tick.abstaining.contains(*r)).all(|r| tick.votes.contains_key(r));
         if all_voted {
             self.decide(t, DecidedBy::AllVoted, now, out);
         } else if decision_due {
@@ -359,18 +409,29 @@ impl Engine {
         }
     }
 
-    /// Adds tick `t`'s window row and, if the worker is seen, runs the GRU and votes.
+    /// Adds tick `t`'s window row and, if we vote for the tick, runs the GRU and votes.
     fn vote(&mut self, t: u64) -> Option<VoteMsg> {
         let tick = self.open.get_mut(&t).expect("open");
         let own = tick.own.as_mut().expect("own frame");
         own.vote_step_done = true;
         let peers_mean = temporal::mean(tick.embeddings.values().flatten().map(Vec::as_slice));
-        let seen = own.embedding.is_some();
+        let will_vote = own.will_vote;
+        let relations = (self.row_layout == RowLayout::Relations).then(|| {
+            let mut r = vec![0.0; RELATION_DIM];
+            match self.cfg.temporal {
+                TemporalModel::Ego => floor::relations(own.worker.as_ref(), &self.floor.own_map.stations(), &mut r),
+                TemporalModel::Collective => {
+                    let team = floor::fuse(own.worker.iter().chain(tick.workers.values()));
+                    floor::relations(team.as_ref(), &self.floor.team_map.stations(), &mut r)
+                }
+            }
+            r
+        });
         // The row is the last use of our embedding and keypoints: move them, don't copy.
-        let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take() };
+        let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations };
         let visibility = own.visibility;
         self.window.insert(t, row);
-        if !seen {
+        if !will_vote {
             return None;
         }
         self.window.input(t, self.cfg.temporal, &mut self.scratch);
@@ -479,6 +540,7 @@ mod tests {
             decision_deadline: Duration::from_millis(60),
             weights: Weights { alpha: 0.5, beta: 0.5 },
             max_open_ticks: 8,
+            camera: CameraCalibration::default(),
         };
         Engine::new(cfg, set.inference(TemporalModel::Collective).unwrap())
     }
@@ -490,6 +552,7 @@ mod tests {
         DetectionFrame {
             robot: id(robot),
             tick,
+            pose: None,
             image_size: [640.0, 480.0],
             human: seen.then(|| HumanDetection {
                 bbox: BBox { x: 300.0, y: 200.0, w: 40.0, h: 120.0 },
@@ -592,7 +655,16 @@ mod tests {
         a.handle(Input::MemberJoined(id("b")), ms(0));
         a.handle(Input::Frame(frame("a", 1, true)), ms(0));
         a.handle(
-            Input::Embedding(EmbeddingMsg { robot: id("b"), instance: 9, tick: 1, embedding: None, visibility: 0 }),
+            Input::Embedding(EmbeddingMsg {
+                robot: id("b"),
+                instance: 9,
+                tick: 1,
+                embedding: None,
+                visibility: 0,
+                votes: false,
+                worker: None,
+                landmarks: vec![],
+            }),
             ms(1),
         );
         let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
@@ -615,14 +687,32 @@ mod tests {
         for r in ["b", "c"] {
             a.handle(Input::MemberJoined(id(r)), ms(0));
             a.handle(
-                Input::Embedding(EmbeddingMsg { robot: id(r), instance: 9, tick: 1, embedding: None, visibility: 0 }),
+                Input::Embedding(EmbeddingMsg {
+                    robot: id(r),
+                    instance: 9,
+                    tick: 1,
+                    embedding: None,
+                    visibility: 0,
+                    votes: false,
+                    worker: None,
+                    landmarks: vec![],
+                }),
                 ms(0),
             );
         }
         a.handle(Input::Frame(frame("a", 2, true)), ms(100));
         // c does not see the worker: its vote is not expected.
         a.handle(
-            Input::Embedding(EmbeddingMsg { robot: id("c"), instance: 9, tick: 2, embedding: None, visibility: 1 }),
+            Input::Embedding(EmbeddingMsg {
+                robot: id("c"),
+                instance: 9,
+                tick: 2,
+                embedding: None,
+                visibility: 1,
+                votes: false,
+                worker: None,
+                landmarks: vec![],
+            }),
             ms(101),
         );
         let out = a.handle(Input::MemberLeft(id("b")), ms(102));
@@ -664,6 +754,43 @@ mod tests {
         }
         assert_eq!(a.open.len(), 8);
         assert_eq!(a.metrics.evicted_ticks, 12);
+    }
+
+    #[test]
+    fn a_localised_robot_shares_its_worker_track_and_the_station_objects_it_sees() {
+        let set = models();
+        let mut a = engine("a", &set);
+        let localised = |tick| DetectionFrame {
+            pose: Some(FloorPose { position: [1.0, 2.0], heading: 0.5 }),
+            ..frame("a", tick, true)
+        };
+        let mut last = None;
+        for t in 1..=3 {
+            last = Some(take_embedding(&a.handle(Input::Frame(localised(t)), ms(100 * t))));
+        }
+        let e = last.unwrap();
+        let w = e.worker.expect("the worker's ankles are on the floor in view: an estimate");
+        let range = (w.position[0] - 1.0).hypot(w.position[1] - 2.0);
+        assert!((1.0..12.0).contains(&range), "in front of the camera: {w:?}");
+        assert_eq!(e.landmarks.len(), 3, "crate, box and pallet mark the storage area");
+        assert!(e.landmarks.iter().all(|l| l.station == 0));
+        assert!(a.floor().own_map.station(0).is_some(), "seen three times: on the map");
+        // A frame without a pose shares nothing on the floor, and a peer's landmarks
+        // reach the team map only.
+        let out = a.handle(Input::Frame(frame("a", 4, true)), ms(400));
+        assert!(take_embedding(&out).landmarks.is_empty());
+        let peer = EmbeddingMsg {
+            robot: id("b"),
+            instance: 2,
+            tick: 4,
+            embedding: None,
+            visibility: 1,
+            votes: false,
+            worker: None,
+            landmarks: vec![Landmark { station: 3, position: [9.0, 9.0], sigma: 0.3 }; 3],
+        };
+        a.handle(Input::Embedding(peer), ms(401));
+        assert!(a.floor().team_map.station(3).is_some() && a.floor().own_map.station(3).is_none());
     }
 
     #[test]

@@ -144,6 +144,7 @@ mod tests {
         DetectionFrame {
             robot: RobotId::new("r").unwrap(),
             tick: 1,
+            pose: None,
             image_size: [300.0, 400.0], // diagonal 500
             human: Some(HumanDetection {
                 bbox: BBox { x: 90.0, y: 90.0, w: 20.0, h: 20.0 }, // centre (100, 100)

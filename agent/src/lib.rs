@@ -15,6 +15,7 @@
 //! Modules:
 //! - [`engine`]: one robot's tick state machine, pure (inputs and `now` in, messages out);
 //! - [`graph`], [`temporal`], [`vote`], [`consensus`]: the pure pipeline stages;
+//! - [`floor`]: back-projection, the shared worker track and station map, relations;
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
 //! - [`daemon`]: Zenoh wiring, membership (liveliness), the event loop;
 //! - [`config`], [`zenoh_config`], [`cli`]: settings and the command line;
@@ -26,6 +27,7 @@ pub mod config;
 pub mod consensus;
 pub mod daemon;
 pub mod engine;
+pub mod floor;
 pub mod graph;
 pub mod http;
 pub mod manifest;

@@ -9,7 +9,7 @@
 //! at the first tick.
 
 use crate::graph::{EdgeWeight, NODE_FEATURE_DIM};
-use crate::temporal::{CNN1D_DIM, COLLECTIVE_DIM, EGO_DIM};
+use crate::temporal::{RowLayout, TemporalModel, CNN1D_DIM};
 use serde::{Deserialize, Serialize};
 use spwi_proto::{EMBEDDING_DIM, NUM_CLASSES};
 use std::path::{Path, PathBuf};
@@ -97,11 +97,19 @@ pub struct Manifest {
     pub frames: Option<usize>,
     pub horizon: usize,
     pub edge_weight: EdgeWeight,
+    /// What the temporal rows hold: the paper's parts only (absent), or also the
+    /// worker's relations to the mapped stations.
+    #[serde(default, skip_serializing_if = "is_paper")]
+    pub row: RowLayout,
     pub consensus: ConsensusDefaults,
     pub models: Models,
     /// Everything else (dataset, evaluation figures, code version) is kept as is.
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+fn is_paper(r: &RowLayout) -> bool {
+    *r == RowLayout::Paper
 }
 
 /// A model set that does not fit the daemon or its own ONNX files.
@@ -171,8 +179,8 @@ impl Manifest {
             let outs: Vec<&[usize]> = spec.outputs.iter().map(|t| t.shape.as_slice()).collect();
             if ins != inputs || outs != outputs {
                 return bad(format!(
-                    "{what} ({}) declares inputs {ins:?} and outputs {outs:?}; with max_nodes {n}, window {} ({w} frames) and horizon {} the daemon feeds {inputs:?} and reads {outputs:?}",
-                    spec.file, self.window, self.horizon
+                    "{what} ({}) declares inputs {ins:?} and outputs {outs:?}; with max_nodes {n}, window {} ({w} frames), horizon {} and {:?} rows the daemon feeds {inputs:?} and reads {outputs:?}",
+                    spec.file, self.window, self.horizon, self.row
                 ));
             }
             Ok(())
@@ -183,8 +191,9 @@ impl Manifest {
             &[&[1, n, NODE_FEATURE_DIM], &[1, n, n]],
             &[&[1, EMBEDDING_DIM], &[1, NUM_CLASSES]],
         )?;
-        expect(&self.models.ego_gru, "ego_gru", &[&[1, w, EGO_DIM]], &[&[1, steps, NUM_CLASSES]])?;
-        expect(&self.models.collective_gru, "collective_gru", &[&[1, w, COLLECTIVE_DIM]], &[&[1, steps, NUM_CLASSES]])?;
+        let (ego, collective) = (TemporalModel::Ego.row_dim(self.row), TemporalModel::Collective.row_dim(self.row));
+        expect(&self.models.ego_gru, "ego_gru", &[&[1, w, ego]], &[&[1, steps, NUM_CLASSES]])?;
+        expect(&self.models.collective_gru, "collective_gru", &[&[1, w, collective]], &[&[1, steps, NUM_CLASSES]])?;
         if let Some(cnn) = &self.models.cnn1d {
             expect(cnn, "cnn1d", &[&[1, w, CNN1D_DIM]], &[&[1, steps, NUM_CLASSES]])?;
         }

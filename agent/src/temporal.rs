@@ -1,19 +1,41 @@
 //! Per-tick features → the GRU's input window (paper II-D, DESIGN "Temporal").
 //!
-//! Each decided tick leaves one row: the robot's own embedding, the mean of the peers'
-//! embeddings that arrived for that tick, and the worker's keypoints normalised by the
-//! image size to [0, 1]. A tick with no row (frame lost) or a part missing (worker not
+//! Each decided tick leaves one row. The paper's rows ([`RowLayout::Paper`]): the
+//! robot's own embedding, the mean of the peers' embeddings that arrived for that tick,
+//! and the worker's keypoints normalised by the image size to [0, 1]. Relation rows
+//! ([`RowLayout::Relations`]): the keypoints and the worker's relations to the mapped
+//! stations ([`crate::floor::relations`]: the robot's own track and map for the ego
+//! model, the team's fused track and shared map for the collective) — no embedding,
+//! because the GCN's embedding does not carry over to floors it was not trained on
+//! (with it the GRU overfits its training floors: models/README.md). A tick with no row (frame lost) or a part missing (worker not
 //! seen, no peer saw it) contributes zeros, which is how the models are trained to read
 //! absence. Rows are keyed by tick, so a window is always the W ticks ending at t, in
 //! order, whatever order the ticks were processed in.
 
+use crate::floor::RELATION_DIM;
 use spwi_proto::{EMBEDDING_DIM, KEYPOINT_VALUES};
 use std::collections::BTreeMap;
 
-/// Width of one ego-GRU row: own embedding ‖ keypoints.
+/// Width of one ego-GRU row of the paper: own embedding ‖ keypoints.
 pub const EGO_DIM: usize = EMBEDDING_DIM + KEYPOINT_VALUES;
-/// Width of one collective-GRU row: own ‖ mean of peers ‖ keypoints.
+/// Width of one collective-GRU row of the paper: own ‖ mean of peers ‖ keypoints.
 pub const COLLECTIVE_DIM: usize = 2 * EMBEDDING_DIM + KEYPOINT_VALUES;
+
+/// What a temporal row holds (recorded in the manifest: a model is only valid with the
+/// rows it was trained on).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RowLayout {
+    /// The paper's rows: embeddings and keypoints.
+    #[default]
+    Paper,
+    /// Keypoints, then the worker's relations to the mapped stations (the robot's own
+    /// for the ego model, the team's for the collective).
+    Relations,
+}
+
+/// Width of a relation row: keypoints ‖ relations.
+pub const RELATION_ROW_DIM: usize = KEYPOINT_VALUES + RELATION_DIM;
 
 /// Width of one row of the 1D-CNN baseline: the worker node's feature ‖ keypoints.
 pub const CNN1D_DIM: usize = crate::graph::NODE_FEATURE_DIM + KEYPOINT_VALUES;
@@ -41,10 +63,11 @@ pub enum TemporalModel {
 }
 
 impl TemporalModel {
-    pub fn row_dim(self) -> usize {
-        match self {
-            TemporalModel::Ego => EGO_DIM,
-            TemporalModel::Collective => COLLECTIVE_DIM,
+    pub fn row_dim(self, layout: RowLayout) -> usize {
+        match (layout, self) {
+            (RowLayout::Paper, TemporalModel::Ego) => EGO_DIM,
+            (RowLayout::Paper, TemporalModel::Collective) => COLLECTIVE_DIM,
+            (RowLayout::Relations, _) => RELATION_ROW_DIM,
         }
     }
 }
@@ -55,6 +78,8 @@ pub struct Row {
     pub own: Option<Vec<f32>>,
     pub peers_mean: Option<Vec<f32>>,
     pub keypoints: Option<Vec<f32>>,
+    /// The relation block, for [`RowLayout::Relations`].
+    pub relations: Option<Vec<f32>>,
 }
 
 /// Normalises pixel keypoints by the image size, x by width and y by height.
@@ -79,21 +104,22 @@ pub fn mean<'a>(embeddings: impl IntoIterator<Item = &'a [f32]>) -> Option<Vec<f
 #[derive(Debug, Clone)]
 pub struct Window {
     len: usize,
+    layout: RowLayout,
     /// Which of the `len` ticks feed the model (all of them unless the model reads fewer frames).
     picked: Vec<usize>,
     rows: BTreeMap<u64, Row>,
 }
 
 impl Window {
-    /// `len` ≥ 1 ticks, every one fed to the model.
+    /// `len` ≥ 1 ticks of paper rows, every one fed to the model.
     pub fn new(len: usize) -> Self {
-        Self::with_frames(len, len)
+        Self::with_frames(len, len, RowLayout::Paper)
     }
 
     /// `len` ≥ 1 ticks of which `frames` (1..=len), at uniform intervals, feed the model.
-    pub fn with_frames(len: usize, frames: usize) -> Self {
+    pub fn with_frames(len: usize, frames: usize, layout: RowLayout) -> Self {
         assert!(len >= 1, "a window holds at least one tick");
-        Window { len, picked: frame_offsets(len, frames), rows: BTreeMap::new() }
+        Window { len, layout, picked: frame_offsets(len, frames), rows: BTreeMap::new() }
     }
 
     /// Rows the model reads.
@@ -121,7 +147,7 @@ impl Window {
     /// The flattened `[frames, row_dim]` input for the window ending at `tick`, into
     /// `out`. Ticks before the first (tick < len - 1) and ticks with no row are zeros.
     pub fn input(&self, tick: u64, model: TemporalModel, out: &mut Vec<f32>) {
-        let dim = model.row_dim();
+        let dim = model.row_dim(self.layout);
         out.clear();
         out.resize(self.picked.len() * dim, 0.0);
         let oldest = tick as i64 - (self.len as i64 - 1); // may be negative: left padding
@@ -129,6 +155,15 @@ impl Window {
             let t = oldest + k as i64;
             let Some(row) = u64::try_from(t).ok().and_then(|t| self.rows.get(&t)) else { continue };
             let slot = &mut out[j * dim..(j + 1) * dim];
+            if self.layout == RowLayout::Relations {
+                if let Some(kp) = &row.keypoints {
+                    slot[..KEYPOINT_VALUES].copy_from_slice(kp);
+                }
+                if let Some(r) = &row.relations {
+                    slot[KEYPOINT_VALUES..].copy_from_slice(r);
+                }
+                continue;
+            }
             if let Some(e) = &row.own {
                 slot[..EMBEDDING_DIM].copy_from_slice(e);
             }
@@ -155,6 +190,7 @@ mod tests {
             own: Some(vec![v; EMBEDDING_DIM]),
             peers_mean: Some(vec![-v; EMBEDDING_DIM]),
             keypoints: Some(vec![v / 10.0; KEYPOINT_VALUES]),
+            relations: Some(vec![v * 100.0; RELATION_DIM]),
         }
     }
 
@@ -177,7 +213,7 @@ mod tests {
     fn collective_rows_carry_the_peer_mean_and_gaps_are_zero() {
         let mut w = Window::new(3);
         w.insert(5, row(1.0));
-        w.insert(7, Row { own: None, peers_mean: Some(vec![4.0; EMBEDDING_DIM]), keypoints: None });
+        w.insert(7, Row { own: None, peers_mean: Some(vec![4.0; EMBEDDING_DIM]), keypoints: None, relations: None });
         let mut out = Vec::new();
         w.input(7, TemporalModel::Collective, &mut out);
         let d = COLLECTIVE_DIM;
@@ -208,7 +244,7 @@ mod tests {
         assert_eq!(frame_offsets(10, 5), vec![0, 2, 5, 7, 9]);
         assert_eq!(frame_offsets(10, 3), vec![0, 5, 9]);
         assert_eq!(frame_offsets(20, 1), vec![19]);
-        let mut w = Window::with_frames(10, 3);
+        let mut w = Window::with_frames(10, 3, RowLayout::Paper);
         for t in 0..30 {
             w.insert(t, row(t as f32));
         }
@@ -217,6 +253,22 @@ mod tests {
         assert_eq!(out.len(), 3 * EGO_DIM);
         let firsts: Vec<f32> = (0..3).map(|j| out[j * EGO_DIM]).collect();
         assert_eq!(firsts, vec![20.0, 25.0, 29.0]);
+    }
+
+    #[test]
+    fn relation_rows_are_keypoints_then_relations() {
+        let mut w = Window::with_frames(2, 2, RowLayout::Relations);
+        w.insert(4, row(1.0));
+        w.insert(5, Row { relations: None, ..row(2.0) });
+        let mut out = Vec::new();
+        w.input(5, TemporalModel::Collective, &mut out);
+        let d = RELATION_ROW_DIM;
+        assert_eq!(TemporalModel::Ego.row_dim(RowLayout::Relations), d);
+        assert_eq!(out.len(), 2 * d);
+        assert!(out[..KEYPOINT_VALUES].iter().all(|&v| v == 0.1));
+        assert!(out[KEYPOINT_VALUES..d].iter().all(|&v| v == 100.0));
+        assert!(out[d..d + KEYPOINT_VALUES].iter().all(|&v| v == 0.2));
+        assert!(out[d + KEYPOINT_VALUES..].iter().all(|&v| v == 0.0), "no relations: zeros");
     }
 
     #[test]

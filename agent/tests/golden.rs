@@ -126,3 +126,21 @@ fn a_manifest_inconsistent_with_the_daemon_is_refused() {
     assert!(e.contains("ego_gru") && e.contains("window 30"), "{e}");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn a_set_whose_rows_the_daemon_cannot_build_is_refused_naming_the_tensor() {
+    // The fixture GRUs read the paper's rows; a manifest claiming relation rows must not
+    // load (the daemon would feed 61 values per row to a model that reads 162).
+    let dir = fixture_copy("rows");
+    let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    m["row"] = "relations".into();
+    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("ego_gru") && e.contains("Relations") && e.contains("[1, 20, 61]"), "{e}");
+    m["row"] = "holograms".into();
+    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    let e = format!("{:#}", ModelSet::load(&dir, Backend::Tract, None).unwrap_err());
+    assert!(e.contains("manifest.json") && e.contains("holograms"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

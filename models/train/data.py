@@ -6,6 +6,8 @@ temporal arrays are ordered episode-major, then tick, then robot, so they reshap
 window (agent/src/temporal.rs): the W ticks ending at t, left-padded with zeros before
 the first tick, a row of zeros where a part is missing (worker not seen, no peer saw
 it), and `frames` of the W rows picked at uniform intervals by the same formula.
+With `relations`, a row is the keypoints and the worker's relations to the mapped
+stations: the robot's own (ego) or the team's (collective), as the agent computes them.
 """
 import json
 import os
@@ -17,6 +19,8 @@ CLASSES = 4
 EMBEDDING = 128
 KEYPOINTS = 34
 FEATURE = 1024
+# agent/src/floor/relations.rs: RELATION_DIM (track 3 + 4 stations x 6)
+RELATIONS = 27
 SPLITS = {"train": 0, "validation": 1, "test": 2}
 
 
@@ -67,13 +71,19 @@ class Sequences:
         self.truth = torch.from_numpy(ex.temporal("truth").astype(np.int64))
         self.visibility = torch.from_numpy(ex.temporal("visibility").astype(np.float32))
         self.feature = torch.from_numpy(ex.temporal("human_feature")) if need_features else None
+        self.rel_ego = torch.from_numpy(ex.temporal("relations_ego"))
+        self.rel_team = torch.from_numpy(ex.temporal("relations_team"))
         self.split = ex.temporal("split")[:, 0, 0]
         self.seed = ex.desc["seed"]
 
-    def ends(self, split, every=1, rng=None):
-        """(episode, tick, robot) index tensors of the windows to use in `split`."""
+    def ends(self, split, every=1, rng=None, tracked=False):
+        """(episode, tick, robot) index tensors of the windows to use in `split`: the
+        ticks the robot sees the worker, and with `tracked` also those on which its own
+        track of the worker is fresh (a relation set votes on those too)."""
         episodes = np.flatnonzero(self.split == SPLITS[split])
         seen = self.seen[episodes].numpy()
+        if tracked:
+            seen = seen | (self.rel_ego[episodes, ..., 0].numpy() > 0)
         e, t, r = np.nonzero(seen)
         keep = (t % every) == (rng.integers(every) if rng is not None else 0)
         return (torch.from_numpy(episodes[e[keep]]), torch.from_numpy(t[keep]), torch.from_numpy(r[keep]))
@@ -87,8 +97,9 @@ def gather(seqs, e, t, r, window, frames):
     return tt.clamp(min=0), valid
 
 
-def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1):
-    """Inputs [B, F, D] and labels [B, H+1] for `kind` in ego, collective, cnn1d.
+def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1, relations=False):
+    """Inputs [B, F, D] and labels [B, H+1] for `kind` in ego, collective, cnn1d
+    (with `relations`, ego and collective rows end with the relation block).
 
     Collective peers: at evaluation (peer_rng None) every other robot of the episode;
     in training a random subset of 0..R-1 of them (0 with a small probability, so the
@@ -99,6 +110,9 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
     v = valid[..., None].float()
     kp = seqs.keypoints[E, tt, R] * v
     labels = seqs.truth[e, t, r, : horizon + 1]
+    if relations and kind != "cnn1d":  # agent/src/temporal.rs, RowLayout::Relations: keypoints ‖ relations
+        rel = seqs.rel_ego if kind == "ego" else seqs.rel_team
+        return torch.cat([kp, rel[E, tt, R] * v], -1), labels
     if kind == "ego":
         return torch.cat([seqs.emb[E, tt, R] * v, kp], -1), labels
     if kind == "cnn1d":

@@ -3,7 +3,7 @@
 them, exports them and writes a complete model set the daemon loads.
 
 Usage: train_temporal.py --data DIR [DIR ...] --gcn-dir DIR --out models/NAME
-                         [--window 20 --horizon 20 --frames W] [--cnn1d] [--epochs 8]
+                         [--window 20 --horizon 20 --frames W] [--cnn1d] [--relations] [--epochs 8]
 
 DIR are `spwi-sim dataset --gcn GCN_DIR/gcn.onnx` exports (so the embeddings are the
 ones the agent's Rust code computes). Writes OUT/{gcn,ego_gru,collective_gru[,cnn1d]}.onnx,
@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, Export, Sequences, batch
+from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, RELATIONS, Export, Sequences, batch
 from export import OPSET, export, io_spec
 from nets import Cnn1dGRU, TemporalGRU
 
@@ -36,7 +36,7 @@ def logits_for(model, seqs, ends, a, kind, chunk=2048):
     with torch.no_grad():
         for i in range(0, len(ends[0]), chunk):
             e, t, r = (x[i : i + chunk] for x in ends)
-            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind)
+            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations)
             out.append(model(x))
             labels.append(y)
     if not out:
@@ -80,11 +80,11 @@ def ece(logits, labels, temperature=1.0, bins=15):
 
 
 def train(kind, all_seqs, a, rng):
-    dim = DIMS[kind]
+    dim = KEYPOINTS + RELATIONS if a.relations and kind != "cnn1d" else DIMS[kind]
     model = Cnn1dGRU(a.horizon) if kind == "cnn1d" else TemporalGRU(dim, a.horizon)
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=1e-4)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, a.epochs)
-    train_ends = [s.ends("train", every=a.every) for s in all_seqs]
+    train_ends = [s.ends("train", every=a.every, tracked=a.relations and kind != "cnn1d") for s in all_seqs]
     val_ends = [s.ends("validation", every=a.every * 2) for s in all_seqs]
     sizes = np.array([len(e[0]) for e in train_ends], dtype=np.float64)
     best, best_state = -1.0, None
@@ -99,7 +99,7 @@ def train(kind, all_seqs, a, rng):
             s, (e, t, r) = all_seqs[k], train_ends[k]
             i = torch.from_numpy(rng.integers(0, len(e), batch_size))
             peer_rng = rng if kind == "collective" else None
-            x, y = batch(s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng)
+            x, y = batch(s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng, relations=a.relations)
             loss = nn.functional.cross_entropy(model(x).reshape(-1, CLASSES), y.reshape(-1))
             opt.zero_grad()
             loss.backward()
@@ -137,6 +137,7 @@ def main():
     ap.add_argument("--horizon", type=int, default=20)
     ap.add_argument("--frames", type=int)
     ap.add_argument("--cnn1d", action="store_true", help="also train the 1D-CNN baseline")
+    ap.add_argument("--relations", action="store_true", help="rows end with the worker's relations to the mapped stations")
     ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--samples", type=int, default=60000, help="training windows per epoch")
     ap.add_argument("--every", type=int, default=2, help="use windows ending every Nth tick")
@@ -183,7 +184,7 @@ def main():
         # reference input: a real test window of the last export
         s = all_seqs[-1]
         e, t, r = (x[:1] for x in s.ends("test"))
-        x, _ = batch(s, e, t, r, a.window, a.frames, a.horizon, kind)
+        x, _ = batch(s, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations)
         path = os.path.join(a.out, f"{FILES[kind]}.onnx")
         references[FILES[kind]] = export(model, (x,), ["x"], ["logits"], path)
         models[FILES[kind]] = {"file": f"{FILES[kind]}.onnx", **io_spec(path), "temperature": round(temperature, 4)}
@@ -197,6 +198,7 @@ def main():
         **({"frames": a.frames} if a.frames != a.window else {}),
         "horizon": a.horizon,
         "edge_weight": exports[0].desc["edge_weight"],
+        **({"row": "relations"} if a.relations else {}),
         "consensus": {"alpha": 0.5, "beta": 0.5},
         "opset": OPSET,
         "dataset": {

@@ -11,8 +11,9 @@ use crate::messages::*;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
-/// Bumped on every incompatible change of any payload.
-pub const PROTOCOL_VERSION: u16 = 1;
+/// Bumped on every incompatible change of any payload (2: robot pose in the detection
+/// frame, worker estimate and landmarks in the embedding message).
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -165,7 +166,28 @@ mod tests {
     #[test]
     fn refuses_other_versions() {
         let b = bincode::serde::encode_to_vec((PROTOCOL_VERSION + 1, vote()), CONFIG).unwrap();
-        assert!(matches!(decode::<VoteMsg>(&b), Err(DecodeError::UnknownVersion { got: 2, .. })));
+        assert!(
+            matches!(decode::<VoteMsg>(&b), Err(DecodeError::UnknownVersion { got, .. }) if got == PROTOCOL_VERSION + 1)
+        );
+    }
+
+    #[test]
+    fn an_old_version_embedding_is_refused_never_misread() {
+        // Version 1's embedding message, before the worker estimate and landmarks.
+        #[derive(serde::Serialize)]
+        struct EmbeddingV1 {
+            robot: RobotId,
+            instance: u64,
+            tick: u64,
+            embedding: Option<Vec<f32>>,
+            visibility: u32,
+        }
+        let old =
+            EmbeddingV1 { robot: RobotId::new("r1").unwrap(), instance: 1, tick: 9, embedding: None, visibility: 3 };
+        let b = bincode::serde::encode_to_vec((1u16, old), CONFIG).unwrap();
+        let e = decode::<EmbeddingMsg>(&b).unwrap_err();
+        assert!(matches!(e, DecodeError::UnknownVersion { got: 1, .. }), "{e}");
+        assert!(e.to_string().contains("protocol version 1"), "{e}");
     }
 
     #[test]

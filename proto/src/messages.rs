@@ -20,6 +20,8 @@ pub const MAX_OBJECTS: usize = 64;
 pub const MAX_STEPS: usize = 128;
 /// Most members one decision may list.
 pub const MAX_MEMBERS: usize = 1024;
+/// Most floor landmarks one embedding message may carry.
+pub const MAX_LANDMARKS: usize = MAX_OBJECTS;
 
 /// Station names by class id.
 pub const STATION_NAMES: [&str; NUM_CLASSES] = ["storage", "workstation", "assembly", "manufacturing"];
@@ -153,11 +155,23 @@ pub struct ObjectDetection {
     pub feature: Vec<f32>,
 }
 
+/// Where a robot's camera stands on the floor and where it points, in the floor frame
+/// (metres; radians counter-clockwise from the floor's x axis). A real robot's
+/// localiser provides it; the simulated world fills it in.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FloorPose {
+    pub position: [f32; 2],
+    pub heading: f32,
+}
+
 /// One camera frame's worth of detections of one robot, for one tick.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DetectionFrame {
     pub robot: RobotId,
     pub tick: u64,
+    /// The camera's pose when the frame was taken; `None` when the robot is not
+    /// localised (it then shares no floor-frame estimates).
+    pub pose: Option<FloorPose>,
     /// Image size in pixels (width, height): bbox distances are normalised by its diagonal.
     pub image_size: [f32; 2],
     pub human: Option<HumanDetection>,
@@ -180,6 +194,9 @@ impl Validate for DetectionFrame {
             return Err(invalid("image_size", "width and height must be at least 1 pixel"));
         }
         dim("scene_feature", &self.scene_feature, FEATURE_DIM)?;
+        if let Some(p) = &self.pose {
+            finite("pose", &[p.position[0], p.position[1], p.heading])?;
+        }
         if let Some(h) = &self.human {
             h.bbox.validate("human.bbox")?;
             dim("human.keypoints", &h.keypoints, KEYPOINT_VALUES)?;
@@ -199,9 +216,48 @@ impl Validate for DetectionFrame {
     }
 }
 
+/// A robot's estimate of the worker on the floor: a constant-velocity track.
+/// The covariance is per axis (the same for x and y): position variance (m²),
+/// position–velocity covariance (m²/s), velocity variance (m²/s²).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WorkerEstimate {
+    pub position: [f32; 2],
+    pub velocity: [f32; 2],
+    pub covariance: [f32; 3],
+}
+
+impl WorkerEstimate {
+    fn validate(&self) -> Result<(), Invalid> {
+        finite("worker.position", &self.position)?;
+        finite("worker.velocity", &self.velocity)?;
+        finite("worker.covariance", &self.covariance)?;
+        let [pp, pv, vv] = self.covariance;
+        if pp <= 0.0 || vv <= 0.0 || pv * pv > pp * vv * (1.0 + 1e-4) {
+            return Err(invalid(
+                "worker.covariance",
+                format!("{:?} is not a covariance (positive definite)", self.covariance),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// An object that marks a station, seen this tick, back-projected onto the floor.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Landmark {
+    pub station: u8,
+    pub position: [f32; 2],
+    /// Standard deviation of the position (m): grows with the distance it was seen at.
+    pub sigma: f32,
+}
+
 /// A robot's GCN output for one tick, shared so peers can run the collective GRU.
-/// `embedding` is `None` when the robot does not see the worker this tick: it will not
-/// vote for this tick, and peers need not wait for it.
+/// `embedding` is `None` when the robot does not see the worker this tick. `votes`
+/// says whether it will vote for the tick (it sees the worker, or its model set votes
+/// from its track of the worker while that is fresh); peers do not wait for the vote
+/// of a robot that will not. `worker` and `landmarks` are
+/// what the robot knows in the floor frame (empty when it is not localised): the
+/// team fuses them into one worker track and one map of the stations.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EmbeddingMsg {
     pub robot: RobotId,
@@ -210,14 +266,30 @@ pub struct EmbeddingMsg {
     pub tick: u64,
     pub embedding: Option<Vec<f32>>,
     pub visibility: u32,
+    pub votes: bool,
+    pub worker: Option<WorkerEstimate>,
+    pub landmarks: Vec<Landmark>,
 }
 
 impl Validate for EmbeddingMsg {
     fn validate(&self) -> Result<(), Invalid> {
-        match &self.embedding {
-            Some(e) => dim("embedding", e, EMBEDDING_DIM),
-            None => Ok(()),
+        if let Some(e) = &self.embedding {
+            dim("embedding", e, EMBEDDING_DIM)?;
         }
+        if let Some(w) = &self.worker {
+            w.validate()?;
+        }
+        if self.landmarks.len() > MAX_LANDMARKS {
+            return Err(invalid("landmarks", format!("{} landmarks, at most {MAX_LANDMARKS}", self.landmarks.len())));
+        }
+        for l in &self.landmarks {
+            class("landmarks.station", l.station)?;
+            finite("landmarks.position", &l.position)?;
+            if !(l.sigma.is_finite() && l.sigma > 0.0) {
+                return Err(invalid("landmarks.sigma", format!("{} must be a positive number", l.sigma)));
+            }
+        }
+        Ok(())
     }
 }
 

@@ -34,10 +34,12 @@ fn frame() -> impl Strategy<Value = DetectionFrame> {
         prop::option::of(human),
         prop::collection::vec(object, 0..6),
         prop::collection::vec(finite(), FEATURE_DIM),
+        prop::option::of((finite(), finite(), finite())),
     )
-        .prop_map(|(robot, tick, (w, h), human, objects, scene_feature)| DetectionFrame {
+        .prop_map(|(robot, tick, (w, h), human, objects, scene_feature, pose)| DetectionFrame {
             robot,
             tick,
+            pose: pose.map(|(x, y, heading)| FloorPose { position: [x, y], heading }),
             image_size: [w, h],
             human,
             objects,
@@ -59,8 +61,12 @@ proptest! {
 
     #[test]
     fn embeddings_round_trip(robot in robot(), instance in any::<u64>(), tick in any::<u64>(),
-                             e in prop::option::of(prop::collection::vec(finite(), EMBEDDING_DIM)), visibility in any::<u32>()) {
-        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility };
+                             e in prop::option::of(prop::collection::vec(finite(), EMBEDDING_DIM)), visibility in any::<u32>(),
+                             worker in prop::option::of((finite(), finite(), finite(), finite(), 0.01f32..10.0, -0.5f32..0.5, 1.0f32..10.0)),
+                             landmarks in prop::collection::vec((0u8..4, finite(), finite(), 0.01f32..5.0), 0..8)) {
+        let worker = worker.map(|(x, y, vx, vy, pp, pv, vv)| WorkerEstimate { position: [x, y], velocity: [vx, vy], covariance: [pp, pv * pp.sqrt(), vv] });
+        let landmarks = landmarks.into_iter().map(|(station, x, y, sigma)| Landmark { station, position: [x, y], sigma }).collect();
+        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, votes: visibility % 2 == 0, worker, landmarks };
         prop_assert_eq!(decode::<EmbeddingMsg>(&encode(&m)).unwrap(), m);
     }
 

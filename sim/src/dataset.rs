@@ -11,7 +11,10 @@
 //!   `[episodes, ticks, robots, …]`: keypoints, visibility, whether the worker is seen,
 //!   the truth now and for the next 30 ticks, the worker's phase; and, given a trained
 //!   GCN (`--gcn MODEL_SET_OR_ONNX`), its embedding and logits computed by the agent's
-//!   own inference code — so training and serving cannot drift apart. With
+//!   own inference code — so training and serving cannot drift apart; and the worker's
+//!   relations to the mapped stations as the agent's [`FloorView`] computes them, from
+//!   the robot's own track and map (`relations_ego`) and from the team's fused track
+//!   and shared map, every robot of the episode being a peer (`relations_team`). With
 //!   `--human-features`, also the worker node's 1024-d feature (the 1D-CNN baseline's
 //!   input; 4 KB a row, so only when asked).
 //!
@@ -22,6 +25,7 @@ use crate::npy::NpyWriter;
 use crate::world_args::{check_robots, WorldArgs};
 use anyhow::{Context, Result};
 use serde_json::json;
+use spwi_agent::floor::{self, FloorView, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::model::{Backend, Gcn};
 use spwi_agent::temporal::normalise_keypoints;
@@ -101,6 +105,8 @@ struct Temporal {
     split: NpyWriter<u8>,
     robot: NpyWriter<u8>,
     tick: NpyWriter<u32>,
+    relations_ego: NpyWriter<f32>,
+    relations_team: NpyWriter<f32>,
     embedding: Option<NpyWriter<f32>>,
     gcn_logits: Option<NpyWriter<f32>>,
     human_feature: Option<NpyWriter<f32>>,
@@ -114,6 +120,8 @@ struct Pending {
     embedding: Vec<f32>,
     logits: [f32; NUM_CLASSES],
     human_feature: Vec<f32>,
+    relations_ego: Vec<f32>,
+    relations_team: Vec<f32>,
 }
 
 /// Writes the dataset; returns (spatial samples, temporal rows).
@@ -144,6 +152,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         split: NpyWriter::create(&f(&td, "split"), &[])?,
         robot: NpyWriter::create(&f(&td, "robot"), &[])?,
         tick: NpyWriter::create(&f(&td, "tick"), &[])?,
+        relations_ego: NpyWriter::create(&f(&td, "relations_ego"), &[RELATION_DIM])?,
+        relations_team: NpyWriter::create(&f(&td, "relations_team"), &[RELATION_DIM])?,
         embedding: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "embedding"), &[EMBEDDING_DIM])).transpose()?,
         gcn_logits: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "gcn_logits"), &[NUM_CLASSES])).transpose()?,
         human_feature: o
@@ -159,6 +169,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     for e in 0..o.episodes {
         let floor = &o.floors[e as usize % o.floors.len()].layout;
         let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
+        let mut views = vec![FloorView::new(crate::calibration::of(&floor.camera)); o.robots];
         let total = o.ticks as usize + FUTURE;
         let mut intents = Vec::with_capacity(total);
         let mut phases = Vec::with_capacity(total);
@@ -171,8 +182,10 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 continue; // only the truth of these ticks is needed
             }
             let mut tick_rows = Vec::with_capacity(o.robots);
+            let mut shared = Vec::with_capacity(o.robots);
             for (slot, id) in ids.iter().enumerate() {
                 let frame = world.observe(slot, id);
+                shared.push(views[slot].observe(&frame));
                 let keypoints = frame
                     .human
                     .as_ref()
@@ -185,6 +198,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                     embedding: vec![0.0; EMBEDDING_DIM],
                     logits: [0.0; NUM_CLASSES],
                     human_feature: Vec::new(),
+                    relations_ego: vec![0.0; RELATION_DIM],
+                    relations_team: vec![0.0; RELATION_DIM],
                 };
                 if let Some(g) = graph.build(&frame) {
                     if t % o.spatial_every == 0 {
@@ -209,6 +224,19 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 }
                 tick_rows.push(row);
             }
+            // What each robot's engine computes at its vote step, every other robot of
+            // the episode being a peer whose estimate and landmarks arrived.
+            let team = floor::fuse(shared.iter().filter_map(|(w, _)| w.as_ref()));
+            for (slot, row) in tick_rows.iter_mut().enumerate() {
+                for (peer, (_, landmarks)) in shared.iter().enumerate() {
+                    if peer != slot {
+                        views[slot].add_peer_landmarks(landmarks);
+                    }
+                }
+                let v = &views[slot];
+                floor::relations(shared[slot].0.as_ref(), &v.own_map.stations(), &mut row.relations_ego);
+                floor::relations(team.as_ref(), &v.team_map.stations(), &mut row.relations_team);
+            }
             rows.push(tick_rows);
         }
         for (t, tick_rows) in rows.into_iter().enumerate() {
@@ -223,6 +251,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 tp.split.push(&[split(e, o.episodes)])?;
                 tp.robot.push(&[slot as u8])?;
                 tp.tick.push(&[t as u32])?;
+                tp.relations_ego.push(&r.relations_ego)?;
+                tp.relations_team.push(&r.relations_team)?;
                 if let (Some(em), Some(lg)) = (tp.embedding.as_mut(), tp.gcn_logits.as_mut()) {
                     em.push(&r.embedding)?;
                     lg.push(&r.logits)?;
@@ -254,7 +284,9 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     }
     sp.episode.finish()?;
     sp.tick.finish()?;
-    tp.keypoints.finish()?;
+    for w in [tp.keypoints, tp.relations_ego, tp.relations_team] {
+        w.finish()?;
+    }
     for w in [tp.seen, tp.truth, tp.phase, tp.split, tp.robot] {
         w.finish()?;
     }
@@ -306,6 +338,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 "split": ["uint8", ["rows"], "0 train, 1 validation, 2 test"],
                 "robot": ["uint8", ["rows"], "robot slot"],
                 "tick": ["uint32", ["rows"], "tick within the episode"],
+                "relations_ego": ["float32", ["rows", RELATION_DIM], "the worker's relations to the mapped stations from the robot's own track and map (agent/src/floor/relations.rs)"],
+                "relations_team": ["float32", ["rows", RELATION_DIM], "the same from the team's fused track and shared map, every robot of the episode a peer"],
                 "embedding": ["float32", ["rows", EMBEDDING_DIM], "GCN embedding of the worker node (only with --gcn; zeros when not seen)"],
                 "gcn_logits": ["float32", ["rows", NUM_CLASSES], "GCN logits (only with --gcn; zeros when not seen)"],
                 "human_feature": ["float32", ["rows", NODE_FEATURE_DIM], "the worker node's feature, global ‖ local (only with --human-features; zeros when not seen)"],

@@ -12,6 +12,7 @@ use spwi_agent::cli::{init_tracing, spawn_signal_handler};
 use spwi_agent::config::AgentConfig;
 use spwi_agent::config::LogFormat;
 use spwi_agent::daemon::{self, Options};
+use spwi_agent::floor::{self, StationMap};
 use spwi_agent::model::ModelSet;
 use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
@@ -87,6 +88,10 @@ struct Observed {
     votes: BTreeMap<RobotId, VoteMsg>,
     last_truth: Option<TruthMsg>,
     trail: std::collections::VecDeque<[f32; 2]>,
+    /// The robots' latest worker estimates (tick, estimate) and every landmark they
+    /// shared: the team's track and station map, as any robot of the team holds them.
+    estimates: BTreeMap<RobotId, (u64, WorkerEstimate)>,
+    station_map: StationMap,
     messages: u64,
     bytes: u64,
 }
@@ -100,6 +105,10 @@ struct PageState {
     worker: [f32; 2],
     trail: Vec<[f32; 2]>,
     truth: u8,
+    /// The team's fused worker track (position, velocity, position sigma in m).
+    team_track: Option<PageTrack>,
+    /// Where the team has mapped each station (class order).
+    stations: [Option<[f32; 2]>; NUM_CLASSES],
     robots: Vec<PageRobot>,
     decision: Option<Vec<u8>>,
     accuracy: f64,
@@ -113,6 +122,13 @@ struct PageRobot {
     position: [f32; 2],
     heading: f32,
     vote: Option<PageVote>,
+}
+
+#[derive(Serialize)]
+struct PageTrack {
+    position: [f32; 2],
+    velocity: [f32; 2],
+    sigma: f32,
 }
 
 #[derive(Serialize)]
@@ -136,6 +152,12 @@ fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoi
         .next_back()
         .and_then(|(_, by)| by.values().next())
         .map(|(d, _)| d.steps.iter().map(|s| s.class).collect());
+    let fresh = o.estimates.values().filter(|(tick, _)| tick + 2 >= t.tick).map(|(_, e)| e);
+    let team_track = floor::fuse(fresh).map(|e| PageTrack {
+        position: e.position,
+        velocity: e.velocity,
+        sigma: e.covariance[0].sqrt(),
+    });
     Some(PageState {
         tick: t.tick,
         scenario,
@@ -143,6 +165,8 @@ fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoi
         worker: t.worker_position,
         trail: o.trail.iter().copied().collect(),
         truth: t.intent,
+        team_track,
+        stations: o.station_map.stations(),
         robots: t
             .robots
             .iter()
@@ -290,6 +314,16 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
                     Topic::Decision => {
                         if let Ok(d) = decode_from::<DecisionMsg>(&bytes, &robot) {
                             o.decisions.entry(d.tick).or_default().insert(robot, (d, Instant::now()));
+                        }
+                    }
+                    Topic::Embedding => {
+                        if let Ok(e) = decode_from::<EmbeddingMsg>(&bytes, &robot) {
+                            for l in &e.landmarks {
+                                o.station_map.add(l);
+                            }
+                            if let Some(w) = e.worker {
+                                o.estimates.insert(robot, (e.tick, w));
+                            }
                         }
                     }
                     Topic::Vote => {

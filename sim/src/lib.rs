@@ -2,6 +2,7 @@
 //!
 //! ```text
 //! service.rs    `spwi-sim world`: frames for every live agent over Zenoh at 10 Hz
+//! calibration.rs the simulated camera as an agent is configured with it
 //! cli.rs        the `spwi-sim` command line: a dispatch table; each tool has its Args and main
 //! dataset.rs    `spwi-sim dataset`: training data (.npy), graphs built by the agent's code
 //! eval/         `spwi-sim eval`: the paper's tables on held-out episodes, the agent's code
@@ -16,6 +17,7 @@
 //! ```
 
 pub mod bench;
+pub mod calibration;
 pub mod cli;
 pub mod dataset;
 pub mod demo;

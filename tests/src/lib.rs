@@ -76,6 +76,7 @@ pub fn scripted_frame(robot: &RobotId, index: usize, tick: u64) -> DetectionFram
     DetectionFrame {
         robot: robot.clone(),
         tick,
+        pose: Some(FloorPose { position: [3.0 * index as f32, 0.0], heading: 0.1 * index as f32 }),
         image_size: [640.0, 480.0],
         human: (tick % 11 != index as u64).then(|| HumanDetection {
             bbox: BBox { x, y: 150.0, w: 40.0, h: 140.0 },

@@ -99,6 +99,9 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             tick: 1,
             embedding: Some(vec![f32::NAN; EMBEDDING_DIM]),
             visibility: 1,
+            votes: true,
+            worker: None,
+            landmarks: vec![],
         });
         let spoofed = encode(&VoteMsg { robot: id("mallory"), ..good_vote.clone() });
         let bads: Vec<(&str, Vec<u8>)> = vec![

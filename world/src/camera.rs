@@ -215,6 +215,7 @@ pub fn detect(
     DetectionFrame {
         robot,
         tick,
+        pose: Some(FloorPose { position: pose.position, heading: pose.heading }),
         image_size: [cam.image[0] as f32, cam.image[1] as f32],
         human,
         objects,

@@ -197,7 +197,7 @@ impl Inference {
     /// Logits for t and each forecast step, from a `[frames, row_dim]` window.
     pub fn gru(&mut self, window: &[f32]) -> Result<Vec<[f32; NUM_CLASSES]>> {
         let m = &self.set.manifest;
-        let dim = self.temporal.row_dim();
+        let dim = self.temporal.row_dim(m.row);
         let out = self.gru.run(&[Input { shape: &[1, m.frames(), dim], data: window }])?;
         let logits = out.into_iter().next().context("gru gave no output")?;
         if logits.len() != (m.horizon + 1) * NUM_CLASSES || logits.iter().any(|v| !v.is_finite()) {

@@ -160,7 +160,7 @@ mod tests {
 
     fn engine(slot: usize, models: &Arc<ModelSet>) -> Engine {
         let id = RobotId::new(format!("r{slot}")).unwrap();
-        let cfg = EngineConfig::new(id, slot as u64 + 1, &TickConfig::default(), &models.manifest);
+        let cfg = EngineConfig::new(id, slot as u64 + 1, &TickConfig::default(), &Default::default(), &models.manifest);
         Engine::new(cfg, models.inference(TemporalModel::Collective).unwrap())
     }
 

@@ -7,9 +7,8 @@
 //! The prediction is the same for t and every future step: the model has no notion of
 //! a goal changing.
 
-use spwi_proto::RobotPose;
+use spwi_agent::floor::track::Axis;
 use spwi_world::geometry::P2;
-use spwi_world::layout::Camera;
 use std::collections::VecDeque;
 
 /// Height of the nose keypoint of the simulated worker (skeleton.rs), metres.
@@ -20,55 +19,6 @@ const VELOCITY_STATES: usize = 12;
 const STANDING: f32 = 0.15;
 /// How far ahead the motion is extrapolated (s).
 const LOOKAHEAD_S: f32 = 15.0;
-
-/// Back-projects image point (u, v) onto the horizontal plane at `height`.
-pub fn back_project(cam: &Camera, pose: &RobotPose, (u, v): (f32, f32), height: f32) -> Option<P2> {
-    let f = cam.focal();
-    let dv = cam.image[1] as f32 / 2.0 - v; // pixels above the image centre
-    if dv.abs() < 1e-3 {
-        return None;
-    }
-    let forward = f * (height - cam.height) / dv;
-    if !(0.1..=50.0).contains(&forward) {
-        return None;
-    }
-    let left = (cam.image[0] as f32 / 2.0 - u) * forward / f;
-    let (c, s) = (pose.heading.cos(), pose.heading.sin());
-    Some([pose.position[0] + forward * c - left * s, pose.position[1] + forward * s + left * c])
-}
-
-/// A 2-D constant-velocity Kalman filter (state x, y, vx, vy; diagonal-per-axis form).
-#[derive(Debug, Clone)]
-struct Axis {
-    x: [f32; 2],      // position, velocity
-    p: [[f32; 2]; 2], // covariance
-}
-
-impl Axis {
-    fn new(z: f32) -> Self {
-        Axis { x: [z, 0.0], p: [[1.0, 0.0], [0.0, 1.0]] }
-    }
-
-    fn predict(&mut self, dt: f32, q: f32) {
-        let [x, v] = self.x;
-        self.x = [x + v * dt, v];
-        let p = self.p;
-        let p00 = p[0][0] + dt * (p[1][0] + p[0][1]) + dt * dt * p[1][1] + q * dt.powi(3) / 3.0;
-        let p01 = p[0][1] + dt * p[1][1] + q * dt * dt / 2.0;
-        let p11 = p[1][1] + q * dt;
-        self.p = [[p00, p01], [p01, p11]];
-    }
-
-    fn update(&mut self, z: f32, r: f32) {
-        let s = self.p[0][0] + r;
-        let k = [self.p[0][0] / s, self.p[1][0] / s];
-        let y = z - self.x[0];
-        self.x = [self.x[0] + k[0] * y, self.x[1] + k[1] * y];
-        let p = self.p;
-        self.p =
-            [[(1.0 - k[0]) * p[0][0], (1.0 - k[0]) * p[0][1]], [p[1][0] - k[1] * p[0][0], p[1][1] - k[1] * p[0][1]]];
-    }
-}
 
 /// One robot's constant-velocity predictor.
 #[derive(Debug, Clone)]
@@ -98,7 +48,7 @@ impl Cvm {
                 }
             }
             _ => {
-                self.axes = Some([Axis::new(z[0]), Axis::new(z[1])]);
+                self.axes = Some([Axis::new(z[0], 1.0), Axis::new(z[1], 1.0)]);
                 self.velocities.clear();
             }
         }
@@ -164,20 +114,5 @@ mod tests {
         }
         assert_eq!(cvm.predict(&SPOTS), Some(1));
         assert_eq!(Cvm::new(0.1).predict(&SPOTS), None);
-    }
-
-    #[test]
-    fn back_projection_inverts_the_camera() {
-        let cam = spwi_world::layout::Layout::default_layout().camera;
-        let pose = RobotPose { robot: spwi_proto::RobotId::new("r").unwrap(), position: [1.0, 2.0], heading: 0.7 };
-        let p = [4.0, 5.0];
-        let img = spwi_world::camera::project(
-            &cam,
-            spwi_world::camera::Pose { position: pose.position, heading: pose.heading },
-            [p[0], p[1], HEAD_HEIGHT],
-        )
-        .unwrap();
-        let back = back_project(&cam, &pose, img, HEAD_HEIGHT).unwrap();
-        assert!((back[0] - p[0]).abs() < 1e-3 && (back[1] - p[1]).abs() < 1e-3, "{back:?}");
     }
 }

@@ -14,7 +14,7 @@ use spwi_agent::config::TickConfig;
 use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
 use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
-use spwi_proto::{DetectionFrame, RobotId, RobotPose, NUM_CLASSES};
+use spwi_proto::{DetectionFrame, RobotId, NUM_CLASSES};
 use spwi_world::layout::Layout;
 use spwi_world::world::{stream, Stream, World};
 use std::time::Duration;
@@ -111,9 +111,10 @@ struct TickRecord {
 }
 
 /// The daemon's own timing (`[tick]` defaults) for robot `slot` of an evaluation.
-fn engine(slot: usize, o: &EvalOptions) -> Result<Engine> {
+fn engine(slot: usize, o: &EvalOptions, layout: &Layout) -> Result<Engine> {
     let id = RobotId::new(format!("r{slot}"))?;
-    let cfg = EngineConfig::new(id, slot as u64 + 1, &TickConfig::default(), &o.models.manifest);
+    let camera = crate::calibration::of(&layout.camera);
+    let cfg = EngineConfig::new(id, slot as u64 + 1, &TickConfig::default(), &camera, &o.models.manifest);
     Ok(Engine::new(cfg, o.models.inference(TemporalModel::Collective)?))
 }
 
@@ -133,9 +134,11 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let pairs = layout.close_pairs();
     let in_close_pair: Vec<bool> =
         (0..NUM_CLASSES as u8).map(|k| pairs.iter().any(|&(a, b)| a == k || b == k)).collect();
-    let engines = (0..n).map(|slot| engine(slot, o)).collect::<Result<Vec<_>>>()?;
+    let engines = (0..n).map(|slot| engine(slot, o, layout)).collect::<Result<Vec<_>>>()?;
     let ids: Vec<RobotId> = engines.iter().map(|e| e.config().robot.clone()).collect();
-    let mut observers = (0..n).map(|_| Observers::new(&o.models)).collect::<Result<Vec<_>>>()?;
+    let mut observers = (0..n)
+        .map(|_| Observers::new(&o.models, crate::calibration::of(&layout.camera)))
+        .collect::<Result<Vec<_>>>()?;
     let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
     let mut stuck: Vec<Option<DetectionFrame>> = vec![None; n];
     let mut intents = Vec::with_capacity(ticks + horizon);
@@ -173,9 +176,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             if slot < o.faults.faulty {
                 frame = stuck_camera(&mut stuck[slot], frame);
             }
-            let r = &world.robots[slot];
-            let pose = RobotPose { robot: ids[slot].clone(), position: r.pose.position, heading: r.pose.heading };
-            obs.see(&frame, &pose, &layout.camera);
+            obs.see(&frame);
             bus.deliver(slot, Input::Frame(frame), now);
             tallies.frames += 1;
         }
@@ -195,9 +196,13 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             if !bus.is_live(slot) {
                 continue;
             }
-            let mut p = obs.predict(tick, embeddings[slot].take(), &spots)?;
+            // Every model is scored on the ticks its robot sees the worker (the paper's
+            // protocol, the same ticks for all); a vote from the track alone counts in
+            // the team's decision only.
+            let seen = embeddings[slot].is_some();
+            let mut p = obs.predict(tick, embeddings[slot].take(), bus.engine(slot).floor(), &spots)?;
             p.gnn = bus.engine(slot).spatial_logits(tick).map(|l| vote::argmax(&l) as u8);
-            p.collective = votes[slot].take();
+            p.collective = votes[slot].take().filter(|_| seen);
             per_robot.push((slot, p));
             decisions.push(decided[slot].take().unwrap_or_default());
         }

@@ -115,7 +115,8 @@ pub struct Report {
     pub per_robot: Vec<PerRobot>,
     /// Share of decided ticks on which every live robot decided the same class for t.
     pub agreement: f64,
-    /// Share of ticks on which the team had a decision (some robot saw the worker).
+    /// Share of ticks on which the team had a decision (some robot saw the worker or,
+    /// with a relation set, still tracked it).
     pub coverage: f64,
     /// Rows: true class; columns: predicted class (at t).
     pub confusion: BTreeMap<&'static str, Confusion>,

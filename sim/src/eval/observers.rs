@@ -1,17 +1,18 @@
 //! What the evaluation runs beside each robot's engine, to compare against it: the
 //! ego-GRU (the same window rows as the engine's, without the peers' part) and the two
 //! baselines the paper compares against (the constant-velocity model and the 1D-CNN).
-//! They watch the robot's frames and its engine's embedding; they never feed the
-//! engine or the fleet.
+//! They watch the robot's frames, its engine's embedding and its engine's own track
+//! and map (the ego model's relations are the robot's own, never the team's); they
+//! never feed the engine or the fleet.
 
-use super::cvm::{back_project, Cvm, HEAD_HEIGHT};
+use super::cvm::{Cvm, HEAD_HEIGHT};
 use anyhow::Result;
+use spwi_agent::floor::{self, CameraCalibration, FloorView, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::model::{Inference, Input, ModelSet, Runner};
-use spwi_agent::temporal::{frame_offsets, normalise_keypoints, Row, TemporalModel, Window, CNN1D_DIM};
+use spwi_agent::temporal::{frame_offsets, normalise_keypoints, Row, RowLayout, TemporalModel, Window, CNN1D_DIM};
 use spwi_agent::vote;
-use spwi_proto::{DetectionFrame, RobotPose, NUM_CLASSES};
-use spwi_world::layout::Camera;
+use spwi_proto::{DetectionFrame, NUM_CLASSES};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -36,6 +37,8 @@ pub struct Observers {
     /// The 1D-CNN's rows (worker feature ‖ keypoints) by tick.
     cnn_rows: BTreeMap<u64, Vec<f32>>,
     cvm: Cvm,
+    camera: CameraCalibration,
+    row_layout: RowLayout,
     keypoints: Option<Vec<f32>>,
     scratch: Vec<f32>,
     window: usize,
@@ -48,15 +51,17 @@ fn classes(logits: &[[f32; NUM_CLASSES]]) -> Vec<u8> {
 }
 
 impl Observers {
-    pub fn new(models: &Arc<ModelSet>) -> Result<Self> {
+    pub fn new(models: &Arc<ModelSet>, camera: CameraCalibration) -> Result<Self> {
         let m = &models.manifest;
         Ok(Observers {
             graph: GraphBuilder::new(m.max_nodes, m.edge_weight),
             ego: models.inference(TemporalModel::Ego)?,
-            ego_rows: Window::with_frames(m.window, m.frames()),
+            ego_rows: Window::with_frames(m.window, m.frames(), m.row),
             cnn1d: m.models.cnn1d.is_some().then(|| models.runner("cnn1d")).transpose()?,
             cnn_rows: BTreeMap::new(),
             cvm: Cvm::new(0.1),
+            camera,
+            row_layout: m.row,
             keypoints: None,
             scratch: Vec::new(),
             window: m.window,
@@ -67,7 +72,7 @@ impl Observers {
 
     /// The robot's frame of this tick (as its engine got it): the 1D-CNN's row and the
     /// constant-velocity model's track.
-    pub fn see(&mut self, frame: &DetectionFrame, pose: &RobotPose, camera: &Camera) {
+    pub fn see(&mut self, frame: &DetectionFrame) {
         let t = frame.tick;
         self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
         if self.cnn1d.is_some() {
@@ -79,18 +84,29 @@ impl Observers {
             }
             self.cnn_rows = self.cnn_rows.split_off(&t.saturating_sub(self.window as u64 - 1));
         }
-        if let Some(h) = &frame.human {
-            if let Some(z) = back_project(camera, pose, (h.keypoints[0], h.keypoints[1]), HEAD_HEIGHT) {
+        if let (Some(h), Some(pose)) = (&frame.human, &frame.pose) {
+            if let Some((z, _)) = self.camera.back_project(pose, (h.keypoints[0], h.keypoints[1]), HEAD_HEIGHT) {
                 self.cvm.observe(t, z);
             }
         }
     }
 
     /// With the embedding the robot's engine computed for tick `t` (`None`: the worker
-    /// was not seen), every observer's prediction.
-    pub fn predict(&mut self, t: u64, embedding: Option<Vec<f32>>, station_spots: &[[f32; 2]]) -> Result<Predictions> {
+    /// was not seen) and its engine's floor view, every observer's prediction.
+    pub fn predict(
+        &mut self,
+        t: u64,
+        embedding: Option<Vec<f32>>,
+        floor_view: &FloorView,
+        station_spots: &[[f32; 2]],
+    ) -> Result<Predictions> {
         let seen = embedding.is_some();
-        self.ego_rows.insert(t, Row { own: embedding, peers_mean: None, keypoints: self.keypoints.take() });
+        let relations = (self.row_layout == RowLayout::Relations).then(|| {
+            let mut r = vec![0.0; RELATION_DIM];
+            floor::relations(floor_view.own_estimate(t).as_ref(), &floor_view.own_map.stations(), &mut r);
+            r
+        });
+        self.ego_rows.insert(t, Row { own: embedding, peers_mean: None, keypoints: self.keypoints.take(), relations });
         let mut out = Predictions::default();
         if !seen {
             return Ok(out);

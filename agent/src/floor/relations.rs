@@ -1,0 +1,85 @@
+//! The worker's relation to every mapped station: what the temporal model reads
+//! beside the embedding and the keypoints. Relative quantities only — distance,
+//! closing and sideways speed, bearing relative to the worker's motion — so nothing
+//! depends on where on the floor a station stands.
+//!
+//! Layout of the [`RELATION_DIM`] values:
+//! `[track present, speed (m/s), position sigma (m)]`, then per station (class order)
+//! `[known, distance / 10 m, closing speed (m/s), sideways speed (m/s), cos bearing,
+//! sin bearing]`. Absent parts are zeros; the bearing is zero below
+//! [`MOVING`] (a standing worker has no direction).
+
+use spwi_proto::{WorkerEstimate, NUM_CLASSES};
+
+/// Values per station.
+pub const PER_STATION: usize = 6;
+/// Values about the track itself.
+pub const TRACK_VALUES: usize = 3;
+/// Width of the relation block of a temporal row.
+pub const RELATION_DIM: usize = TRACK_VALUES + NUM_CLASSES * PER_STATION;
+/// Below this speed (m/s) the worker has no direction of motion.
+pub const MOVING: f32 = 0.2;
+
+/// The relation features of a worker estimate to the stations of a map, into `out`
+/// (length [`RELATION_DIM`]).
+pub fn relations(worker: Option<&WorkerEstimate>, stations: &[Option<[f32; 2]>; NUM_CLASSES], out: &mut [f32]) {
+    assert_eq!(out.len(), RELATION_DIM);
+    out.fill(0.0);
+    let Some(w) = worker else { return };
+    let v = w.velocity;
+    let speed = v[0].hypot(v[1]);
+    out[0] = 1.0;
+    out[1] = speed;
+    out[2] = w.covariance[0].max(0.0).sqrt();
+    for (s, at) in stations.iter().enumerate() {
+        let Some(at) = at else { continue };
+        let d = [at[0] - w.position[0], at[1] - w.position[1]];
+        let dist = d[0].hypot(d[1]);
+        let u = if dist > 1e-3 { [d[0] / dist, d[1] / dist] } else { [0.0, 0.0] };
+        let o = &mut out[TRACK_VALUES + s * PER_STATION..TRACK_VALUES + (s + 1) * PER_STATION];
+        o[0] = 1.0;
+        o[1] = dist / 10.0;
+        o[2] = u[0] * v[0] + u[1] * v[1]; // rate at which the distance shrinks
+        o[3] = u[0] * v[1] - u[1] * v[0];
+        if speed >= MOVING && dist > 1e-3 {
+            let (c, sn) = ((u[0] * v[0] + u[1] * v[1]) / speed, (v[0] * u[1] - v[1] * u[0]) / speed);
+            o[4] = c;
+            o[5] = sn;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn walker(position: [f32; 2], velocity: [f32; 2]) -> WorkerEstimate {
+        WorkerEstimate { position, velocity, covariance: [0.04, 0.0, 0.1] }
+    }
+
+    #[test]
+    fn the_station_ahead_closes_and_the_one_behind_recedes() {
+        let stations = [Some([10.0, 0.0]), Some([-10.0, 0.0]), None, Some([0.0, 5.0])];
+        let mut out = [0.0; RELATION_DIM];
+        relations(Some(&walker([0.0, 0.0], [1.0, 0.0])), &stations, &mut out);
+        let st = |s: usize| &out[TRACK_VALUES + s * PER_STATION..TRACK_VALUES + (s + 1) * PER_STATION];
+        assert_eq!(&out[..2], &[1.0, 1.0]);
+        assert_eq!(st(0), &[1.0, 1.0, 1.0, 0.0, 1.0, 0.0]);
+        assert_eq!(st(1), &[1.0, 1.0, -1.0, 0.0, -1.0, 0.0]);
+        assert!(st(2).iter().all(|&x| x == 0.0), "unmapped station: zeros");
+        assert!(
+            st(3)[2].abs() < 1e-6 && st(3)[4].abs() < 1e-6 && st(3)[5] > 0.99,
+            "to the left, neither closing nor receding"
+        );
+    }
+
+    #[test]
+    fn features_do_not_depend_on_where_the_scene_stands() {
+        let (mut a, mut b) = ([0.0; RELATION_DIM], [0.0; RELATION_DIM]);
+        relations(Some(&walker([1.0, 2.0], [0.6, 0.8])), &[Some([4.0, 6.0]), None, None, None], &mut a);
+        relations(Some(&walker([101.0, -48.0], [0.6, 0.8])), &[Some([104.0, -44.0]), None, None, None], &mut b);
+        assert_eq!(a, b);
+        relations(None, &[Some([4.0, 6.0]), None, None, None], &mut a);
+        assert!(a.iter().all(|&x| x == 0.0), "no track: zeros");
+    }
+}

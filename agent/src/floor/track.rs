@@ -1,0 +1,190 @@
+//! The worker's track on the floor: a constant-velocity Kalman filter per axis, and
+//! the fusion of the estimates the robots share into the team's track.
+//!
+//! The filter runs on tick numbers (10 Hz), so the same frames give the same track in
+//! the daemon, a replay and the evaluation. A gap longer than [`MAX_GAP_TICKS`] starts
+//! the track afresh; an estimate is shared only while the worker was measured within
+//! [`FRESH_TICKS`].
+
+use spwi_proto::WorkerEstimate;
+
+/// Seconds per tick.
+pub const TICK_S: f32 = 0.1;
+/// A gap longer than this (2 s) restarts the track.
+pub const MAX_GAP_TICKS: u64 = 20;
+/// An estimate is shared while the last measurement is at most this old (1 s).
+pub const FRESH_TICKS: u64 = 10;
+/// Process noise: the worker's acceleration spectral density, (m/s²)² per s.
+const Q: f32 = 0.5;
+/// Velocity variance of a new track (m²/s²): walking speed is unknown at first.
+const INITIAL_VELOCITY_VAR: f32 = 1.0;
+
+/// One axis: state (position, velocity) and its covariance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Axis {
+    pub x: [f32; 2],
+    pub p: [[f32; 2]; 2],
+}
+
+impl Axis {
+    pub fn new(z: f32, var: f32) -> Self {
+        Axis { x: [z, 0.0], p: [[var, 0.0], [0.0, INITIAL_VELOCITY_VAR]] }
+    }
+
+    pub fn predict(&mut self, dt: f32, q: f32) {
+        let [x, v] = self.x;
+        self.x = [x + v * dt, v];
+        let p = self.p;
+        let p00 = p[0][0] + dt * (p[1][0] + p[0][1]) + dt * dt * p[1][1] + q * dt.powi(3) / 3.0;
+        let p01 = p[0][1] + dt * p[1][1] + q * dt * dt / 2.0;
+        let p11 = p[1][1] + q * dt;
+        self.p = [[p00, p01], [p01, p11]];
+    }
+
+    pub fn update(&mut self, z: f32, r: f32) {
+        let s = self.p[0][0] + r;
+        let k = [self.p[0][0] / s, self.p[1][0] / s];
+        let y = z - self.x[0];
+        self.x = [self.x[0] + k[0] * y, self.x[1] + k[1] * y];
+        let p = self.p;
+        self.p =
+            [[(1.0 - k[0]) * p[0][0], (1.0 - k[0]) * p[0][1]], [p[1][0] - k[1] * p[0][0], p[1][1] - k[1] * p[0][1]]];
+    }
+}
+
+/// One robot's track of the worker from its own measurements.
+#[derive(Debug, Clone, Default)]
+pub struct Track {
+    axes: Option<[Axis; 2]>,
+    /// Tick the state is at.
+    at: u64,
+    /// Tick of the last measurement.
+    measured: u64,
+}
+
+impl Track {
+    /// A floor measurement `z` with standard deviation `sigma` (m) at `tick`.
+    pub fn observe(&mut self, tick: u64, z: [f32; 2], sigma: f32) {
+        let r = sigma * sigma;
+        match self.axes.as_mut() {
+            Some(axes) if tick >= self.at && tick - self.measured <= MAX_GAP_TICKS => {
+                let dt = (tick - self.at) as f32 * TICK_S;
+                for (a, z) in axes.iter_mut().zip(z) {
+                    a.predict(dt, Q);
+                    a.update(z, r);
+                }
+            }
+            _ => self.axes = Some([Axis::new(z[0], r), Axis::new(z[1], r)]),
+        }
+        self.at = tick;
+        self.measured = tick;
+    }
+
+    /// The estimate predicted to `tick`, if the worker was measured recently.
+    pub fn estimate(&self, tick: u64) -> Option<WorkerEstimate> {
+        let axes = self.axes.as_ref()?;
+        if tick < self.measured || tick - self.measured > FRESH_TICKS {
+            return None;
+        }
+        let mut axes = *axes;
+        let dt = tick.saturating_sub(self.at) as f32 * TICK_S;
+        for a in axes.iter_mut() {
+            a.predict(dt, Q);
+        }
+        // The covariance shared is the mean of the two axes' (they see the same noise).
+        let p = |i: usize, j: usize| (axes[0].p[i][j] + axes[1].p[i][j]) / 2.0;
+        Some(WorkerEstimate {
+            position: [axes[0].x[0], axes[1].x[0]],
+            velocity: [axes[0].x[1], axes[1].x[1]],
+            covariance: [p(0, 0), p(0, 1), p(1, 1)],
+        })
+    }
+}
+
+/// The team's track from the estimates the robots hold for one tick: inverse-variance
+/// weighting of positions and of velocities (the robots' measurement noise is
+/// independent). `None` without estimates. Order does not matter.
+pub fn fuse<'a>(estimates: impl IntoIterator<Item = &'a WorkerEstimate>) -> Option<WorkerEstimate> {
+    let (mut wp, mut wv, mut pos, mut vel, mut rho) = (0.0f64, 0.0f64, [0.0f64; 2], [0.0f64; 2], 0.0f64);
+    let mut n = 0;
+    for e in estimates {
+        let [pp, pv, vv] = e.covariance.map(f64::from);
+        let (a, b) = (1.0 / pp, 1.0 / vv);
+        wp += a;
+        wv += b;
+        for k in 0..2 {
+            pos[k] += a * e.position[k] as f64;
+            vel[k] += b * e.velocity[k] as f64;
+        }
+        rho += a * pv / (pp * vv).sqrt();
+        n += 1;
+    }
+    if n == 0 {
+        return None;
+    }
+    let (pp, vv) = (1.0 / wp, 1.0 / wv);
+    let pv = (rho / wp) * (pp * vv).sqrt();
+    Some(WorkerEstimate {
+        position: pos.map(|p| (p / wp) as f32),
+        velocity: vel.map(|v| (v / wv) as f32),
+        covariance: [pp as f32, pv as f32, vv as f32],
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic standard normal from a counter (Box–Muller over a hash).
+    fn noise(k: u64) -> f32 {
+        let h = |x: u64| ((x.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+        ((-2.0 * h(2 * k + 1).ln()).sqrt() * (std::f64::consts::TAU * h(2 * k + 2)).cos()) as f32
+    }
+
+    fn truth(t: u64) -> [f32; 2] {
+        [1.0 + 1.2 * TICK_S * t as f32, 2.0 + 0.4 * TICK_S * t as f32]
+    }
+
+    #[test]
+    fn a_straight_walk_is_tracked_with_its_velocity() {
+        let mut tr = Track::default();
+        for t in 0..40 {
+            let z = truth(t);
+            tr.observe(t, [z[0] + 0.1 * noise(t), z[1] + 0.1 * noise(t + 1000)], 0.1);
+        }
+        let e = tr.estimate(40).unwrap();
+        let z = truth(40);
+        assert!((e.position[0] - z[0]).hypot(e.position[1] - z[1]) < 0.2, "{e:?}");
+        assert!((e.velocity[0] - 1.2).abs() < 0.3 && (e.velocity[1] - 0.4).abs() < 0.3, "{e:?}");
+        assert!(tr.estimate(40 + FRESH_TICKS + 1).is_none(), "an old track is not shared");
+    }
+
+    #[test]
+    fn two_robots_fused_track_better_than_either() {
+        // Two robots, each with its own noise, far (0.5 m) and near (0.3 m).
+        let (mut a, mut b) = (Track::default(), Track::default());
+        let (mut err_a, mut err_b, mut err_f) = (0.0, 0.0, 0.0);
+        for t in 0..600u64 {
+            let z = truth(t % 100);
+            if t % 100 == 0 {
+                (a, b) = (Track::default(), Track::default()); // a new walk every 10 s
+            }
+            a.observe(t, [z[0] + 0.5 * noise(t), z[1] + 0.5 * noise(t + 7000)], 0.5);
+            b.observe(t, [z[0] + 0.3 * noise(t + 3000), z[1] + 0.3 * noise(t + 9000)], 0.3);
+            if t % 100 < 20 {
+                continue; // let the filters settle
+            }
+            let (ea, eb) = (a.estimate(t).unwrap(), b.estimate(t).unwrap());
+            let f = fuse([&ea, &eb]).unwrap();
+            let err = |e: &WorkerEstimate| (e.position[0] - z[0]).powi(2) + (e.position[1] - z[1]).powi(2);
+            err_a += err(&ea);
+            err_b += err(&eb);
+            err_f += err(&f);
+            assert!(f.covariance[0] < ea.covariance[0].min(eb.covariance[0]));
+        }
+        assert!(err_f < err_a && err_f < err_b, "fused {err_f}, a {err_a}, b {err_b}");
+        let (ea, eb) = (a.estimate(599).unwrap(), b.estimate(599).unwrap());
+        assert_eq!(fuse([&ea, &eb]), fuse([&eb, &ea]), "order does not matter");
+        assert!(fuse([]).is_none());
+    }
+}
