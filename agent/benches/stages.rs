@@ -117,6 +117,8 @@ fn bench_backend(backend: Backend) {
             weights: Weights { alpha: 0.5, beta: 0.5 },
             max_open_ticks: 64,
             camera: Default::default(),
+            relay_after: None,
+            stale_after: 0, // the bench repeats one frame on purpose
         },
         set.inference(TemporalModel::Collective).unwrap(),
     );
@@ -159,6 +161,7 @@ fn bench_codec() {
         voters: (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect(),
         live_members: 4,
         decided_by: DecidedBy::AllVoted,
+        digest: 0x5eed,
     };
     let (eb, vb, db) = (encode(&e), encode(&v), encode(&d));
     println!(

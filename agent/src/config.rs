@@ -32,6 +32,11 @@ pub struct TickConfig {
     pub embedding_wait_ms: u64,
     /// Decide with the votes at hand this long after a tick starts (ms).
     pub decision_deadline_ms: u64,
+    /// Relay the ballots held for a tick this long after it starts (ms; 0: never).
+    pub relay_ms: u64,
+    /// A camera showing the same worker detection this many frames in a row is frozen:
+    /// set aside until it changes (0: never).
+    pub stale_after_frames: u32,
     /// Weight of visibility in the vote; default: the model manifest's.
     pub alpha: Option<f32>,
     /// Weight of confidence in the vote; default: the model manifest's.
@@ -79,6 +84,8 @@ impl Default for TickConfig {
             temporal: TemporalModel::Collective,
             embedding_wait_ms: 30,
             decision_deadline_ms: 60,
+            relay_ms: 40,
+            stale_after_frames: 5,
             alpha: None,
             beta: None,
             max_open_ticks: 64,
@@ -114,14 +121,17 @@ impl AgentConfig {
     /// Defaults, overlaid by `file` if given, then by the environment.
     pub fn load(file: Option<&Path>) -> Result<AgentConfig> {
         let mut cfg = match file {
-            Some(p) => {
-                let text = std::fs::read_to_string(p).with_context(|| format!("cannot read config {}", p.display()))?;
-                toml::from_str(&text).with_context(|| format!("config {} is not valid", p.display()))?
-            }
+            Some(p) => AgentConfig::from_file(p)?,
             None => AgentConfig::default(),
         };
         cfg.apply_env(|k| std::env::var(k).ok())?;
         Ok(cfg)
+    }
+
+    /// Defaults overlaid by `file` alone (no environment), not yet validated.
+    pub fn from_file(file: &Path) -> Result<AgentConfig> {
+        let text = std::fs::read_to_string(file).with_context(|| format!("cannot read config {}", file.display()))?;
+        toml::from_str(&text).with_context(|| format!("config {} is not valid", file.display()))
     }
 
     /// Applies `SPWI_*` overrides read through `get`.
@@ -162,6 +172,13 @@ impl AgentConfig {
             bail!(
                 "tick.embedding_wait_ms = {}: must be within 1..={} (tick.decision_deadline_ms)",
                 t.embedding_wait_ms,
+                t.decision_deadline_ms
+            );
+        }
+        if t.relay_ms >= t.decision_deadline_ms {
+            bail!(
+                "tick.relay_ms = {}: must be below tick.decision_deadline_ms ({}) for relays to arrive in time; 0 relays nothing",
+                t.relay_ms,
                 t.decision_deadline_ms
             );
         }
@@ -219,6 +236,15 @@ mod tests {
         let mut c = AgentConfig::default();
         c.tick.alpha = Some(f32::NAN);
         assert!(c.validate().unwrap_err().to_string().contains("tick.alpha"));
+        let c: AgentConfig = toml::from_str("[tick]\ndecision_deadline_ms = 40\n").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("tick.relay_ms = 40") && e.contains("below tick.decision_deadline_ms (40)"), "{e}");
+        let c: AgentConfig = toml::from_str("[tick]\ndecision_deadline_ms = 40\nrelay_ms = 0\n").unwrap();
+        c.validate().expect("relaying nothing is allowed");
+        let c: AgentConfig = toml::from_str("[camera]\nheight_m = 0.02\n").unwrap();
+        assert_eq!(c.camera.fov_deg, 90.0, "unset camera fields keep their defaults");
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("camera.height_m") && e.contains("0.1..=5"), "{e}");
     }
 
     #[test]

@@ -58,6 +58,31 @@ pub fn decide(ballots: &mut [Ballot<'_>], w: Weights) -> Vec<TeamStep> {
         .collect()
 }
 
+/// A digest of the ballots, sorted by robot as [`decide`] leaves them: FNV-1a over each
+/// origin, visibility and step, so that it is the same on every robot and every build.
+/// Two robots that name the same digest for a tick decided on the same ballots.
+pub fn digest(ballots: &[Ballot<'_>]) -> u64 {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0100_0000_01b3;
+    let mut h = OFFSET;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h = (h ^ u64::from(b)).wrapping_mul(PRIME);
+        }
+    };
+    for b in ballots {
+        eat(b.robot.as_str().as_bytes());
+        eat(&[0xff]); // ids hold no 0xff byte: the id ends here
+        eat(&b.visibility.to_le_bytes());
+        eat(&(b.steps.len() as u32).to_le_bytes());
+        for s in b.steps {
+            eat(&[s.class]);
+            eat(&s.confidence.to_bits().to_le_bytes());
+        }
+    }
+    h
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,6 +144,23 @@ mod tests {
         );
         assert_eq!(d[0].class, 1);
         assert!((d[0].score - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_digest_names_the_ballot_set_whatever_the_order() {
+        let (a, b) = (id("a"), id("b"));
+        let (sa, sb) = ([sv(3, 0.5)], [sv(1, 0.5)]);
+        let mut ab = [Ballot { robot: &a, visibility: 2, steps: &sa }, Ballot { robot: &b, visibility: 1, steps: &sb }];
+        let mut ba = [ab[1], ab[0]];
+        let w = Weights { alpha: 0.5, beta: 0.5 };
+        decide(&mut ab, w);
+        decide(&mut ba, w);
+        assert_eq!(digest(&ab), digest(&ba));
+        assert_ne!(digest(&ab), digest(&ab[..1]), "one ballot fewer, another digest");
+        let sb2 = [sv(1, 0.50001)];
+        let other = [ab[0], Ballot { steps: &sb2, ..ab[1] }];
+        assert_ne!(digest(&ab), digest(&other), "a confidence that differs, another digest");
+        assert_eq!(digest(&[]), 0xcbf2_9ce4_8422_2325, "FNV-1a's offset basis: fixed across builds");
     }
 
     #[test]

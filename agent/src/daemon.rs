@@ -100,6 +100,7 @@ pub async fn run(
         (keys::all_robots(&fleet, Topic::Embedding), Topic::Embedding),
         (keys::all_robots(&fleet, Topic::Vote), Topic::Vote),
         (keys::all_robots(&fleet, Topic::Decision), Topic::Decision),
+        (keys::all_robots(&fleet, Topic::Ballots), Topic::Ballots),
     ] {
         let (tx, overflow, fleet) = (tx.clone(), overflow.clone(), fleet.clone());
         let sub = session
@@ -138,6 +139,7 @@ pub async fn run(
         embedding: session.declare_publisher(publish(Topic::Embedding)).express(true).await.map_err(|e| anyhow!(e))?,
         vote: session.declare_publisher(publish(Topic::Vote)).express(true).await.map_err(|e| anyhow!(e))?,
         decision: session.declare_publisher(publish(Topic::Decision)).express(true).await.map_err(|e| anyhow!(e))?,
+        ballots: session.declare_publisher(publish(Topic::Ballots)).express(true).await.map_err(|e| anyhow!(e))?,
     };
     let (out_tx, out_rx) = mpsc::channel::<(Topic, Vec<u8>)>(OUTGOING_QUEUE);
     let outgoing_dropped = Arc::new(AtomicU64::new(0));
@@ -158,6 +160,8 @@ pub async fn run(
         last_decision: None,
         recent_decisions: Default::default(),
         duplicate_robot_id: Vec::new(),
+        feed_stale: false,
+        stale_peers: Vec::new(),
         metrics: engine.metrics.clone(),
     }));
     let mut http_task = None;
@@ -215,6 +219,7 @@ pub async fn run(
             let out = match &o {
                 Output::Embedding(m) => (Topic::Embedding, encode(m)),
                 Output::Vote(m) => (Topic::Vote, encode(m)),
+                Output::Ballots(m) => (Topic::Ballots, encode(m)),
                 Output::Decision(m) => {
                     decided.push(RecentDecision { tick: m.tick, class: m.steps.first().map(|s| s.class) });
                     (Topic::Decision, encode(m))
@@ -236,6 +241,8 @@ pub async fn run(
                 s.last_decision = engine.last_decision.clone();
                 s.remember(decided);
                 s.duplicate_robot_id = engine.duplicates.iter().copied().collect();
+                s.feed_stale = engine.feed_is_stale();
+                s.stale_peers = engine.stale_peers();
                 s.metrics = engine.metrics.clone();
             }
         }
@@ -272,6 +279,7 @@ struct Publishers {
     embedding: zenoh::pubsub::Publisher<'static>,
     vote: zenoh::pubsub::Publisher<'static>,
     decision: zenoh::pubsub::Publisher<'static>,
+    ballots: zenoh::pubsub::Publisher<'static>,
 }
 
 impl Publishers {
@@ -283,6 +291,7 @@ impl Publishers {
                 Topic::Embedding => &self.embedding,
                 Topic::Vote => &self.vote,
                 Topic::Decision => &self.decision,
+                Topic::Ballots => &self.ballots,
                 Topic::Detections => unreachable!("agents publish no detections"),
             };
             let started = Instant::now();
@@ -303,6 +312,7 @@ fn decode_input(topic: Topic, robot: &RobotId, bytes: &[u8]) -> Result<Input, De
         Topic::Embedding => Input::Embedding(decode_from(bytes, robot)?),
         Topic::Vote => Input::Vote(decode_from(bytes, robot)?),
         Topic::Decision => Input::Decision(decode_from(bytes, robot)?),
+        Topic::Ballots => Input::Ballots(decode_from(bytes, robot)?),
     })
 }
 

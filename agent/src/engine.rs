@@ -10,11 +10,25 @@
 //!                                          whether this robot will vote for the tick)
 //!            peers' embeddings for the tick arrive
 //! all active peers' embeddings in, or embedding_wait passed
-//!       ─► window row (own ‖ mean(peers) ‖ keypoints) ─► GRU ─► Vote out
+//!       ─► window row ─► GRU ─► Vote out
+//!          (paper rows: own ‖ mean(peers) ‖ keypoints; relation rows: keypoints ‖
+//!           the worker's relations to the stations, from the team's fused track and map)
 //!            peers' votes arrive
+//! relay_after passed ─► Ballots out (every vote held for the tick, ours and peers')
+//!            peers' relayed ballots fill in votes lost on our own links
 //! a vote from every active member that said it votes, or decision_deadline passed
-//!       ─► consensus ─► Decision out
+//!       ─► consensus ─► Decision out (naming a digest of the ballots counted)
 //! ```
+//!
+//! The decision is a deterministic function of the ballots held, so robots that hold
+//! the same ballots decide the same; relaying each robot's ballots partway through the
+//! tick is what makes them hold the same ballots when links lose messages. Comparing
+//! digests with peers' decisions shows, per robot, when it decided on fewer ballots.
+//!
+//! A feed that repeats itself is set aside ([`crate::stale`]): our own frames showing
+//! the worker identically `stale_after` times in a row count as not seeing the worker
+//! (no embedding, no track, no vote) until they change; a peer whose embedding repeats
+//! as often is heard as abstaining, its votes and floor estimates left out.
 //!
 //! Deadlines run from the first thing this robot heard about the tick (its own frame
 //! or a peer's message), so a robot whose own frame is lost still decides from its
@@ -27,6 +41,7 @@ use crate::floor::{self, CameraCalibration, FloorView, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
+use crate::stale::Repeats;
 use crate::temporal::{self, Row, RowLayout, TemporalModel, Window};
 use crate::vote;
 use spwi_proto::*;
@@ -50,6 +65,13 @@ pub struct EngineConfig {
     /// The camera, for back-projecting detections onto the floor.
     #[serde(default)]
     pub camera: CameraCalibration,
+    /// When to relay the ballots held for a tick, from its start (`None`: never).
+    #[serde(default)]
+    pub relay_after: Option<Duration>,
+    /// A feed showing the same worker detection this many times in a row is stale
+    /// (0: never).
+    #[serde(default)]
+    pub stale_after: u32,
 }
 
 impl EngineConfig {
@@ -75,6 +97,8 @@ impl EngineConfig {
             },
             max_open_ticks: tick.max_open_ticks,
             camera: camera.clone(),
+            relay_after: (tick.relay_ms > 0).then(|| Duration::from_millis(tick.relay_ms)),
+            stale_after: tick.stale_after_frames,
         }
     }
 }
@@ -85,6 +109,8 @@ pub enum Input {
     Frame(DetectionFrame),
     Embedding(EmbeddingMsg),
     Vote(VoteMsg),
+    /// The ballots a peer holds for a tick.
+    Ballots(BallotsMsg),
     /// A peer decision, compared with ours to measure agreement.
     Decision(DecisionMsg),
     MemberJoined(RobotId),
@@ -98,6 +124,7 @@ pub enum Input {
 pub enum Output {
     Embedding(EmbeddingMsg),
     Vote(VoteMsg),
+    Ballots(BallotsMsg),
     Decision(DecisionMsg),
 }
 
@@ -114,7 +141,7 @@ struct Own {
     worker: Option<WorkerEstimate>,
     /// We vote for this tick: we see the worker, or (relation rows) we track it.
     will_vote: bool,
-    /// The vote step ran: the window row is in and, if the worker was seen, we voted.
+    /// The vote step ran: the window row is in and, if `will_vote`, we voted.
     vote_step_done: bool,
 }
 
@@ -129,8 +156,10 @@ struct Tick {
     /// Peers that said they will not vote for the tick.
     abstaining: BTreeSet<RobotId>,
     votes: BTreeMap<RobotId, VoteMsg>,
-    /// Peers' decisions that arrived before ours: their class at t.
-    peer_decisions: Vec<Option<u8>>,
+    /// We published the ballots we hold for the tick.
+    relayed: bool,
+    /// Peers' decisions that arrived before ours.
+    peer_decisions: Vec<Verdict>,
 }
 
 impl Tick {
@@ -142,8 +171,24 @@ impl Tick {
             workers: BTreeMap::new(),
             abstaining: BTreeSet::new(),
             votes: BTreeMap::new(),
+            relayed: false,
             peer_decisions: Vec::new(),
         }
+    }
+}
+
+/// What a decision was made of: enough to compare two robots' decisions of a tick.
+#[derive(Debug, Clone)]
+struct Verdict {
+    class: Option<u8>,
+    /// Sorted.
+    voters: Vec<RobotId>,
+    digest: u64,
+}
+
+impl Verdict {
+    fn of(d: &DecisionMsg) -> Verdict {
+        Verdict { class: d.steps.first().map(|s| s.class), voters: d.voters.clone(), digest: d.digest }
     }
 }
 
@@ -164,7 +209,11 @@ pub struct Engine {
     /// Peers heard from at least once.
     active: BTreeSet<RobotId>,
     open: BTreeMap<u64, Tick>,
-    decided: BTreeMap<u64, Vec<TeamStep>>,
+    decided: BTreeMap<u64, Verdict>,
+    /// Our own feed: the worker's box and keypoints, frame after frame.
+    own_feed: Repeats<(BBox, Vec<f32>)>,
+    /// Each peer's feed: its embeddings.
+    peer_feeds: BTreeMap<RobotId, Repeats<Vec<f32>>>,
     pub metrics: Metrics,
     /// Instance ids of other daemons seen using our robot id.
     pub duplicates: BTreeSet<u64>,
@@ -194,6 +243,8 @@ impl Engine {
             active: BTreeSet::new(),
             open: BTreeMap::new(),
             decided: BTreeMap::new(),
+            own_feed: Repeats::default(),
+            peer_feeds: BTreeMap::new(),
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
             last_decision: None,
@@ -218,6 +269,20 @@ impl Engine {
         &self.floor
     }
 
+    /// Our own feed repeats itself: we set it aside until it changes.
+    pub fn feed_is_stale(&self) -> bool {
+        self.own_feed.is_stale(self.cfg.stale_after)
+    }
+
+    /// Peers whose feeds repeat themselves: left out until they change.
+    pub fn stale_peers(&self) -> Vec<RobotId> {
+        self.peer_feeds.iter().filter(|(_, f)| f.is_stale(self.cfg.stale_after)).map(|(r, _)| r.clone()).collect()
+    }
+
+    fn peer_is_stale(&self, robot: &RobotId) -> bool {
+        self.peer_feeds.get(robot).is_some_and(|f| f.is_stale(self.cfg.stale_after))
+    }
+
     /// The spatial-only prediction (GCN logits) for our frame of `tick`, if it showed
     /// the worker: what the evaluation scores as the GNN alone.
     pub fn spatial_logits(&self, tick: u64) -> Option<[f32; NUM_CLASSES]> {
@@ -228,9 +293,15 @@ impl Engine {
     pub fn next_deadline(&self) -> Option<Duration> {
         self.open
             .values()
-            .map(|t| match &t.own {
-                Some(o) if !o.vote_step_done => t.started + self.cfg.embedding_wait.min(self.cfg.decision_deadline),
-                _ => t.started + self.cfg.decision_deadline,
+            .map(|t| {
+                let next = match &t.own {
+                    Some(o) if !o.vote_step_done => t.started + self.cfg.embedding_wait.min(self.cfg.decision_deadline),
+                    _ => t.started + self.cfg.decision_deadline,
+                };
+                match self.cfg.relay_after {
+                    Some(after) if !t.relayed => next.min(t.started + after),
+                    _ => next,
+                }
             })
             .min()
     }
@@ -240,29 +311,17 @@ impl Engine {
         let mut out = Vec::new();
         match input {
             Input::Frame(f) => self.on_frame(f, now, &mut out),
-            Input::Embedding(e) => {
-                if e.robot != self.cfg.robot {
-                    // Where a peer saw station objects stays true after its tick.
-                    self.floor.add_peer_landmarks(&e.landmarks);
-                }
-                if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
-                    if let Some(w) = e.worker {
-                        tick.workers.insert(e.robot.clone(), w);
-                    }
-                    if !e.votes {
-                        tick.abstaining.insert(e.robot.clone());
-                    }
-                    tick.embeddings.insert(e.robot.clone(), e.embedding);
-                    self.advance(e.tick, now, &mut out);
-                }
-            }
+            Input::Embedding(e) => self.on_embedding(e, now, &mut out),
             Input::Vote(v) => {
                 let t = v.tick;
-                if let Some(tick) = self.accept_peer(&v.robot.clone(), v.instance, t, now) {
+                if self.peer_is_stale(&v.robot) {
+                    self.metrics.stale_peer_messages += 1;
+                } else if let Some(tick) = self.accept_peer(&v.robot.clone(), v.instance, t, now) {
                     tick.votes.insert(v.robot.clone(), v);
                     self.advance(t, now, &mut out);
                 }
             }
+            Input::Ballots(b) => self.on_ballots(b, now, &mut out),
             Input::Decision(d) => self.compare(&d),
             Input::MemberJoined(r) => {
                 if r != self.cfg.robot {
@@ -279,7 +338,7 @@ impl Engine {
         out
     }
 
-    fn on_frame(&mut self, f: DetectionFrame, now: Duration, out: &mut Vec<Output>) {
+    fn on_frame(&mut self, mut f: DetectionFrame, now: Duration, out: &mut Vec<Output>) {
         if f.robot != self.cfg.robot {
             return; // the daemon only subscribes to our own detections
         }
@@ -288,6 +347,26 @@ impl Engine {
             return;
         }
         self.metrics.frames += 1;
+        let was_stale = self.feed_is_stale();
+        self.own_feed.see(f.human.as_ref().map(|h| (h.bbox, h.keypoints.clone())));
+        let stale = self.feed_is_stale();
+        if stale != was_stale {
+            if stale {
+                tracing::warn!(
+                    tick = f.tick,
+                    repeats = self.cfg.stale_after,
+                    "our camera repeats the same worker detection: a frozen feed; not voting until it changes"
+                );
+            } else {
+                tracing::info!(tick = f.tick, "our camera's feed changes again: voting");
+            }
+        }
+        if stale {
+            // Nothing of a frozen frame is evidence: not the worker, not the objects.
+            self.metrics.repeated_frames += 1;
+            f.human = None;
+            f.objects.clear();
+        }
         let t0 = Instant::now();
         let embedding = match self.graph.build(&f) {
             None => None,
@@ -312,7 +391,7 @@ impl Engine {
         };
         let keypoints = f.human.as_ref().map(|h| temporal::normalise_keypoints(&h.keypoints, f.image_size));
         let visibility = f.visibility();
-        let (worker, landmarks) = self.floor.observe(&f);
+        let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
         let will_vote = embedding.is_some() || (self.row_layout == RowLayout::Relations && worker.is_some());
@@ -330,6 +409,57 @@ impl Engine {
         tick.own =
             Some(Own { arrived: now, visibility, embedding, keypoints, worker, will_vote, vote_step_done: false });
         self.advance(f.tick, now, out);
+    }
+
+    fn on_embedding(&mut self, e: EmbeddingMsg, now: Duration, out: &mut Vec<Output>) {
+        let from_peer = e.robot != self.cfg.robot;
+        if from_peer {
+            self.peer_feeds.entry(e.robot.clone()).or_default().see(e.embedding.clone());
+        }
+        let stale = self.peer_is_stale(&e.robot);
+        if stale {
+            self.metrics.stale_peer_messages += 1;
+        } else if from_peer {
+            // Where a peer saw station objects stays true after its tick.
+            self.floor.add_peer_landmarks(&e.landmarks);
+        }
+        if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
+            // A stale peer is heard as one that does not see the worker and abstains.
+            if stale || !e.votes {
+                tick.abstaining.insert(e.robot.clone());
+            }
+            if stale {
+                tick.embeddings.insert(e.robot.clone(), None);
+            } else {
+                if let Some(w) = e.worker {
+                    tick.workers.insert(e.robot.clone(), w);
+                }
+                tick.embeddings.insert(e.robot.clone(), e.embedding);
+            }
+            self.advance(e.tick, now, out);
+        }
+    }
+
+    /// A peer's relayed ballots: the votes we do not hold yet join the tick (never our
+    /// own, never a stale peer's); for a tick already decided they are only counted.
+    fn on_ballots(&mut self, b: BallotsMsg, now: Duration, out: &mut Vec<Output>) {
+        if let Some(ours) = self.decided.get(&b.tick) {
+            let missed = b.votes.iter().filter(|v| v.robot != self.cfg.robot && !ours.voters.contains(&v.robot));
+            self.metrics.late_relayed_ballots += missed.count() as u64;
+        }
+        let me = self.cfg.robot.clone();
+        let usable: Vec<VoteMsg> =
+            b.votes.into_iter().filter(|v| v.robot != me && !self.peer_is_stale(&v.robot)).collect();
+        let Some(tick) = self.accept_peer(&b.robot, b.instance, b.tick, now) else { return };
+        let mut used = 0;
+        for v in usable {
+            if let std::collections::btree_map::Entry::Vacant(slot) = tick.votes.entry(v.robot.clone()) {
+                slot.insert(v);
+                used += 1;
+            }
+        }
+        self.metrics.relayed_ballots_used += used;
+        self.advance(b.tick, now, out);
     }
 
     /// Checks a peer message's origin and tick; returns the tick to file it in.
@@ -386,6 +516,13 @@ impl Engine {
                     self.open.get_mut(&t).expect("open").votes.insert(self.cfg.robot.clone(), v.clone());
                     out.push(Output::Vote(v));
                 }
+            }
+        }
+
+        // Relay: partway through the tick, the ballots we hold go to every peer.
+        if let Some(after) = self.cfg.relay_after {
+            if now >= self.open[&t].started + after {
+                self.relay(t, out);
             }
         }
 
@@ -454,7 +591,29 @@ impl Engine {
         }
     }
 
+    /// Publishes the ballots we hold for tick `t`, once (nothing when we hold none).
+    fn relay(&mut self, t: u64, out: &mut Vec<Output>) {
+        let tick = self.open.get_mut(&t).expect("open");
+        if tick.relayed {
+            return;
+        }
+        tick.relayed = true;
+        if !tick.votes.is_empty() {
+            out.push(Output::Ballots(BallotsMsg {
+                robot: self.cfg.robot.clone(),
+                instance: self.cfg.instance,
+                tick: t,
+                votes: tick.votes.values().cloned().collect(),
+            }));
+        }
+    }
+
     fn decide(&mut self, t: u64, by: DecidedBy, now: Duration, out: &mut Vec<Output>) {
+        // Deciding before the relay time: the ballots we hold go out now, since a peer
+        // that lost one of them may still be waiting.
+        if self.cfg.relay_after.is_some() {
+            self.relay(t, out);
+        }
         let tick = self.open.remove(&t).expect("open");
         let t0 = Instant::now();
         let mut ballots: Vec<Ballot<'_>> = tick
@@ -463,6 +622,7 @@ impl Engine {
             .map(|v| Ballot { robot: &v.robot, visibility: v.visibility, steps: &v.steps })
             .collect();
         let steps = consensus::decide(&mut ballots, self.cfg.weights);
+        let digest = consensus::digest(&ballots);
         let voters: Vec<RobotId> = ballots.iter().map(|b| b.robot.clone()).collect();
         self.metrics.observe(Stage::Consensus, t0.elapsed());
         if let Some(own) = &tick.own {
@@ -480,12 +640,13 @@ impl Engine {
             voters,
             live_members: self.live.len() as u32 + 1,
             decided_by: by,
+            digest,
         };
-        let ours = steps.first().map(|s| s.class);
+        let ours = Verdict::of(&d);
         for theirs in &tick.peer_decisions {
-            self.record_agreement(ours, *theirs);
+            self.record_agreement(&ours, theirs);
         }
-        self.decided.insert(t, steps);
+        self.decided.insert(t, ours);
         while self.decided.len() as u64 > DECIDED_MEMORY {
             self.decided.pop_first();
         }
@@ -501,18 +662,25 @@ impl Engine {
             }
             return;
         }
-        let theirs = d.steps.first().map(|s| s.class);
-        if let Some(ours) = self.decided.get(&d.tick) {
-            let ours = ours.first().map(|s| s.class);
-            self.record_agreement(ours, theirs);
+        let theirs = Verdict::of(d);
+        if let Some(ours) = self.decided.get(&d.tick).cloned() {
+            self.record_agreement(&ours, &theirs);
         } else if let Some(tick) = self.open.get_mut(&d.tick) {
             tick.peer_decisions.push(theirs);
         }
     }
 
-    fn record_agreement(&mut self, ours: Option<u8>, theirs: Option<u8>) {
-        self.metrics.agreement_compared += 1;
-        self.metrics.agreement_same += u64::from(ours == theirs);
+    fn record_agreement(&mut self, ours: &Verdict, theirs: &Verdict) {
+        let m = &mut self.metrics;
+        m.agreement_compared += 1;
+        m.agreement_same += u64::from(ours.class == theirs.class);
+        if ours.digest != theirs.digest {
+            m.ballot_sets_differ += 1;
+            let theirs_has_ours = ours.voters.iter().all(|v| theirs.voters.binary_search(v).is_ok());
+            if theirs_has_ours && theirs.voters.len() > ours.voters.len() {
+                m.decided_on_fewer_ballots += 1;
+            }
+        }
     }
 }
 
@@ -541,6 +709,8 @@ mod tests {
             weights: Weights { alpha: 0.5, beta: 0.5 },
             max_open_ticks: 8,
             camera: CameraCalibration::default(),
+            relay_after: None,
+            stale_after: 5,
         };
         Engine::new(cfg, set.inference(TemporalModel::Collective).unwrap())
     }
@@ -556,7 +726,8 @@ mod tests {
             image_size: [640.0, 480.0],
             human: seen.then(|| HumanDetection {
                 bbox: BBox { x: 300.0, y: 200.0, w: 40.0, h: 120.0 },
-                keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32).collect(),
+                // A live detector: the keypoints move a little every frame.
+                keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32 + (seed * 7.0).sin()).collect(),
                 feature: feat(1.0),
             }),
             objects: (0..3)
@@ -791,6 +962,242 @@ mod tests {
         };
         a.handle(Input::Embedding(peer), ms(401));
         assert!(a.floor().team_map.station(3).is_some() && a.floor().own_map.station(3).is_none());
+    }
+
+    #[test]
+    fn a_relation_set_votes_from_a_fresh_track_and_says_so() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
+        let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
+        assert_eq!(set.manifest.row, RowLayout::Relations, "the shipped default set reads relation rows");
+        let mut a = engine("a", &set);
+        let localised = |tick, seen| DetectionFrame {
+            pose: Some(FloorPose { position: [1.0, 2.0], heading: 0.5 }),
+            ..frame("a", tick, seen)
+        };
+        for t in 1..=3 {
+            a.handle(Input::Frame(localised(t, true)), ms(100 * t));
+        }
+        // Tick 4: the worker is not seen, but the track is fresh: announce a vote and vote.
+        let out = a.handle(Input::Frame(localised(4, false)), ms(400));
+        let e = take_embedding(&out);
+        assert!(e.embedding.is_none() && e.worker.is_some() && e.votes, "{e:?}");
+        take_vote(&out);
+        assert!(!decisions(&out)[0].steps.is_empty(), "the team still has an answer");
+        // More than a second without the worker: the track is stale, no vote.
+        let out = a.handle(Input::Frame(localised(4 + 11, false)), ms(1500));
+        let e = take_embedding(&out);
+        assert!(e.worker.is_none() && !e.votes);
+        assert!(out.iter().all(|o| !matches!(o, Output::Vote(_))));
+        // A peer that announced a vote is waited for; one that did not is not.
+        let mut b = engine("b", &set);
+        b.handle(Input::MemberJoined(id("a")), ms(0));
+        let announce = |votes| EmbeddingMsg { votes, ..e.clone() };
+        b.handle(Input::Embedding(announce(false)), ms(1500)); // a is now an active member
+        b.handle(Input::Embedding(EmbeddingMsg { tick: 20, ..announce(true) }), ms(1900));
+        let out = b.handle(Input::Frame(DetectionFrame { robot: id("b"), ..localised(20, true) }), ms(1900));
+        take_vote(&out);
+        assert!(decisions(&out).is_empty(), "a said it votes for tick 20: b waits for it");
+        b.handle(Input::Embedding(EmbeddingMsg { tick: 21, ..announce(false) }), ms(2000));
+        let out = b.handle(Input::Frame(DetectionFrame { robot: id("b"), ..localised(21, true) }), ms(2000));
+        assert_eq!(decisions(&out).len(), 1, "a said it abstains from tick 21: b decides at once");
+    }
+
+    fn relaying(robot: &str, set: &Arc<ModelSet>, relay_after: Option<Duration>) -> Engine {
+        let mut e = engine(robot, set);
+        e.cfg.relay_after = relay_after;
+        e
+    }
+
+    /// What one robot's outputs become at a peer: its inputs.
+    fn as_inputs(out: &[Output]) -> Vec<Input> {
+        out.iter()
+            .map(|o| match o.clone() {
+                Output::Embedding(m) => Input::Embedding(m),
+                Output::Vote(m) => Input::Vote(m),
+                Output::Ballots(m) => Input::Ballots(m),
+                Output::Decision(m) => Input::Decision(m),
+            })
+            .collect()
+    }
+
+    /// Three robots that know each other, each having heard from the others.
+    fn team_of_three(set: &Arc<ModelSet>, relay_after: Option<Duration>) -> Vec<Engine> {
+        let mut team: Vec<Engine> = ["a", "b", "c"].iter().map(|r| relaying(r, set, relay_after)).collect();
+        for i in 0..3 {
+            for j in (0..3).filter(|&j| j != i) {
+                let other = team[j].cfg.robot.clone();
+                team[i].handle(Input::MemberJoined(other), ms(0));
+            }
+        }
+        let warm: Vec<Vec<Output>> =
+            (0..3).map(|i| team[i].handle(Input::Frame(frame(["a", "b", "c"][i], 1, false)), ms(0))).collect();
+        // Each hears the others' embeddings (their decisions are left out: nothing compared yet).
+        for (i, out) in warm.iter().enumerate() {
+            for j in (0..3).filter(|&j| j != i) {
+                for input in as_inputs(out).into_iter().filter(|i| matches!(i, Input::Embedding(_))) {
+                    team[j].handle(input, ms(1));
+                }
+            }
+        }
+        team
+    }
+
+    /// Tick `t` where all three see the worker and a's vote never reaches b directly.
+    /// Returns each robot's outputs of the tick so far.
+    fn tick_losing_a_vote_to_b(team: &mut [Engine], t: u64) -> Vec<Vec<Output>> {
+        let now = ms(100 * t);
+        let mut outs: Vec<Vec<Output>> =
+            (0..3).map(|i| team[i].handle(Input::Frame(frame(["a", "b", "c"][i], t, true)), now)).collect();
+        let embeddings: Vec<Input> = outs.iter().map(|o| Input::Embedding(take_embedding(o))).collect();
+        for i in 0..3 {
+            for (j, e) in embeddings.iter().enumerate().filter(|(j, _)| *j != i) {
+                let said = team[i].handle(e.clone(), now + ms(1 + j as u64));
+                outs[i].extend(said);
+            }
+        }
+        let votes: Vec<VoteMsg> = outs.iter().map(|o| take_vote(o)).collect();
+        for i in 0..3 {
+            for (j, v) in votes.iter().enumerate().filter(|(j, _)| *j != i && !(*j == 0 && i == 1)) {
+                let said = team[i].handle(Input::Vote(v.clone()), now + ms(5 + j as u64));
+                outs[i].extend(said);
+            }
+        }
+        outs
+    }
+
+    #[test]
+    fn relayed_ballots_fill_in_a_vote_lost_on_our_link_and_the_digests_agree() {
+        let set = models();
+        let mut team = team_of_three(&set, Some(ms(40)));
+        let outs = tick_losing_a_vote_to_b(&mut team, 2);
+        let (da, dc) = (decisions(&outs[0]), decisions(&outs[2]));
+        assert_eq!((da.len(), dc.len()), (1, 1), "a and c hold every vote: they decide at once");
+        assert!(decisions(&outs[1]).is_empty(), "b waits for a's vote");
+        // Deciding, c relays what it holds; b takes a's vote from it and decides the same.
+        let relay = outs[2].iter().find(|o| matches!(o, Output::Ballots(_))).expect("c relays as it decides");
+        let Output::Ballots(relay) = relay else { unreachable!() };
+        assert_eq!(relay.votes.len(), 3);
+        let ob = team[1].handle(Input::Ballots(relay.clone()), ms(215));
+        let db = decisions(&ob);
+        assert_eq!(db.len(), 1);
+        assert_eq!(db[0].decided_by, DecidedBy::AllVoted);
+        assert_eq!((db[0].digest, &db[0].steps), (da[0].digest, &da[0].steps));
+        assert_eq!(dc[0].digest, da[0].digest);
+        assert_eq!(team[1].metrics.relayed_ballots_used, 1);
+        // Peers' decisions name the same digest: nothing counted as differing.
+        team[1].handle(Input::Decision(da[0].clone()), ms(216));
+        assert_eq!((team[1].metrics.agreement_compared, team[1].metrics.ballot_sets_differ), (1, 0));
+        // A relay for a decided tick is counted, never applied.
+        let mut late = relay.clone();
+        late.votes.push(VoteMsg { robot: id("d"), ..late.votes[0].clone() });
+        let out = team[1].handle(Input::Ballots(late), ms(230));
+        assert!(out.is_empty());
+        assert_eq!(team[1].metrics.late_relayed_ballots, 1, "d's vote arrived after b decided without it");
+    }
+
+    #[test]
+    fn without_relays_a_robot_that_decided_on_fewer_ballots_counts_it() {
+        let set = models();
+        let mut team = team_of_three(&set, None);
+        let outs = tick_losing_a_vote_to_b(&mut team, 2);
+        assert!(outs.iter().flatten().all(|o| !matches!(o, Output::Ballots(_))), "relaying is off");
+        let ob = team[1].handle(Input::Poll, ms(260));
+        let db = decisions(&ob);
+        assert_eq!((db.len(), db[0].decided_by, db[0].voters.len()), (1, DecidedBy::Deadline, 2));
+        let da = decisions(&outs[0])[0].clone();
+        assert_ne!(da.digest, db[0].digest);
+        team[1].handle(Input::Decision(da), ms(261));
+        let m = &team[1].metrics;
+        assert_eq!((m.ballot_sets_differ, m.decided_on_fewer_ballots), (1, 1));
+    }
+
+    #[test]
+    fn relays_go_out_at_the_relay_time_when_the_tick_is_still_open() {
+        let set = models();
+        let mut a = relaying("a", &set, Some(ms(40)));
+        a.handle(Input::MemberJoined(id("b")), ms(0));
+        a.handle(
+            Input::Vote(VoteMsg {
+                robot: id("b"),
+                instance: 2,
+                tick: 1,
+                steps: vec![StepVote { class: 1, confidence: 0.5 }],
+                visibility: 1,
+            }),
+            ms(0),
+        );
+        a.handle(Input::Poll, ms(99)); // tick 1, opened by b's vote, is decided
+                                       // b is an active member; a's own frame shows the worker at tick 2, b stays silent.
+        let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
+        assert!(out.iter().all(|o| !matches!(o, Output::Ballots(_))));
+        assert_eq!(a.next_deadline(), Some(ms(130)), "the embedding wait comes first");
+        a.handle(Input::Poll, ms(130));
+        assert_eq!(a.next_deadline(), Some(ms(140)), "then the relay");
+        let out = a.handle(Input::Poll, ms(140));
+        let Some(Output::Ballots(b)) = out.first() else { panic!("a relay at 40 ms: {out:?}") };
+        assert_eq!((b.tick, b.votes.len(), &b.votes[0].robot), (2, 1, &id("a")));
+        assert_eq!(a.next_deadline(), Some(ms(160)), "relayed once; the deadline is next");
+    }
+
+    #[test]
+    fn a_frozen_camera_stops_voting_until_it_changes() {
+        let set = models();
+        let mut a = engine("a", &set);
+        let frozen = frame("a", 1, true);
+        for t in 1..=4 {
+            let out = a.handle(Input::Frame(DetectionFrame { tick: t, ..frozen.clone() }), ms(100 * t));
+            take_vote(&out);
+        }
+        assert!(!a.feed_is_stale());
+        for t in 5..=7 {
+            let out = a.handle(Input::Frame(DetectionFrame { tick: t, ..frozen.clone() }), ms(100 * t));
+            let e = take_embedding(&out);
+            assert!(e.embedding.is_none() && !e.votes && e.visibility == 0 && e.worker.is_none(), "{e:?}");
+            assert!(out.iter().all(|o| !matches!(o, Output::Vote(_))), "tick {t}: a frozen feed does not vote");
+            assert!(decisions(&out)[0].steps.is_empty());
+        }
+        assert!(a.feed_is_stale());
+        assert_eq!(a.metrics.repeated_frames, 3);
+        let out = a.handle(Input::Frame(frame("a", 8, true)), ms(800));
+        take_vote(&out);
+        assert!(!a.feed_is_stale(), "the feed changed: voting again");
+    }
+
+    #[test]
+    fn a_peer_whose_embedding_repeats_is_heard_as_abstaining() {
+        let set = models();
+        let mut b = engine("b", &set);
+        b.handle(Input::MemberJoined(id("a")), ms(0));
+        let frozen = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 1, true)), ms(0)));
+        let vote_of_a = |tick| VoteMsg {
+            robot: id("a"),
+            instance: 1,
+            tick,
+            steps: vec![StepVote { class: 3, confidence: 1.0 }; 21],
+            visibility: 9,
+        };
+        for t in 1..=7u64 {
+            let now = ms(100 * t);
+            b.handle(Input::Embedding(EmbeddingMsg { tick: t, ..frozen.clone() }), now);
+            let out = b.handle(Input::Frame(frame("b", t, true)), now);
+            let mine = take_vote(&out);
+            if t < 5 {
+                assert!(decisions(&out).is_empty(), "tick {t}: b waits for a's vote");
+                let d = b.handle(Input::Vote(vote_of_a(t)), now + ms(1));
+                assert_eq!(decisions(&d)[0].voters, vec![id("a"), id("b")]);
+            } else {
+                let d = decisions(&out);
+                assert_eq!(d.len(), 1, "tick {t}: a's feed repeats itself, b does not wait for it");
+                assert_eq!(d[0].voters, vec![id("b")]);
+                assert_eq!(d[0].steps[0].class, mine.steps[0].class);
+                assert!(b.handle(Input::Vote(vote_of_a(t)), now + ms(1)).is_empty());
+            }
+        }
+        assert_eq!(b.stale_peers(), vec![id("a")]);
+        assert_eq!(b.metrics.stale_peer_messages, 3 * 2, "three embeddings and three votes left out");
+        let moving = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 8, true)), ms(0)));
+        b.handle(Input::Embedding(moving), ms(800));
+        assert!(b.stale_peers().is_empty(), "a's feed moves again");
     }
 
     #[test]

@@ -10,11 +10,13 @@
 //!                       model/ (ego or collective GRU) ─► vote.rs ──publish──► peers
 //!                               ▼
 //!            consensus.rs over the votes of the live members ─► decision ──publish
+//!                 (ballots held are relayed partway through the tick)
 //! ```
 //!
 //! Modules:
 //! - [`engine`]: one robot's tick state machine, pure (inputs and `now` in, messages out);
 //! - [`graph`], [`temporal`], [`vote`], [`consensus`]: the pure pipeline stages;
+//! - [`stale`]: feeds that repeat themselves (a frozen camera), set aside;
 //! - [`floor`]: back-projection, the shared worker track and station map, relations;
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
 //! - [`daemon`]: Zenoh wiring, membership (liveliness), the event loop;
@@ -35,6 +37,7 @@ pub mod metrics;
 pub mod model;
 pub mod record;
 pub mod router;
+pub mod stale;
 pub mod status;
 pub mod temporal;
 pub mod vote;

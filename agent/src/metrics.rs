@@ -108,6 +108,18 @@ pub struct Metrics {
     /// Peer decisions compared with ours, and how many were the same.
     pub agreement_compared: u64,
     pub agreement_same: u64,
+    /// Peer decisions that counted other ballots than ours (their digest differs).
+    pub ballot_sets_differ: u64,
+    /// ... of which counted every ballot we did and more: we decided on fewer.
+    pub decided_on_fewer_ballots: u64,
+    /// Peers' votes we got only through another peer's relay.
+    pub relayed_ballots_used: u64,
+    /// Relayed votes that arrived after we decided without them.
+    pub late_relayed_ballots: u64,
+    /// Our own frames set aside because the feed repeated itself (a frozen camera).
+    pub repeated_frames: u64,
+    /// Messages of peers whose feed repeats itself, left out.
+    pub stale_peer_messages: u64,
     pub stages: BTreeMap<Stage, Histogram>,
 }
 
@@ -137,7 +149,7 @@ impl Metrics {
     pub fn render(&self, robot: &str, members: usize) -> String {
         let mut o = String::new();
         let l = format!("robot=\"{robot}\"");
-        let counters: [(&str, &str, u64); 11] = [
+        let counters: [(&str, &str, u64); 17] = [
             ("spwi_frames_total", "detection frames processed", self.frames),
             ("spwi_frames_with_worker_total", "frames in which the worker was seen", self.frames_with_worker),
             ("spwi_decisions_total", "team decisions published", self.decisions),
@@ -161,6 +173,32 @@ impl Metrics {
                 self.outgoing_dropped,
             ),
             ("spwi_agreement_compared_total", "peer decisions compared with ours", self.agreement_compared),
+            (
+                "spwi_ballot_sets_differ_total",
+                "peer decisions whose ballot digest differs from ours",
+                self.ballot_sets_differ,
+            ),
+            (
+                "spwi_decided_on_fewer_ballots_total",
+                "peer decisions that counted every ballot we did and more",
+                self.decided_on_fewer_ballots,
+            ),
+            (
+                "spwi_relayed_ballots_used_total",
+                "peer votes received only through another peer's relay",
+                self.relayed_ballots_used,
+            ),
+            (
+                "spwi_late_relayed_ballots_total",
+                "relayed votes that arrived after we decided without them",
+                self.late_relayed_ballots,
+            ),
+            ("spwi_repeated_frames_total", "own frames set aside: the feed repeated itself", self.repeated_frames),
+            (
+                "spwi_stale_peer_messages_total",
+                "messages of peers whose feed repeats itself, left out",
+                self.stale_peer_messages,
+            ),
         ];
         for (name, help, v) in counters {
             let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} counter\n{name}{{{l}}} {v}");

@@ -10,10 +10,10 @@
 //! | topic | payload |
 //! |---|---|
 //! | `/spwi/config` | the engine configuration and model set name (JSON, once) |
-//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/vote`, `/spwi/in/decision` | a received message |
+//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/vote`, `/spwi/in/ballots`, `/spwi/in/decision` | a received message |
 //! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (JSON) |
 //! | `/spwi/in/poll` | empty: time passed |
-//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/decision` | a published message |
+//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision` | a published message |
 //!
 //! Log and publish times are nanoseconds of engine time (since the daemon started).
 
@@ -51,16 +51,18 @@ pub struct Recorder {
     sequence: u32,
 }
 
-const TOPICS: [(&str, &str); 10] = [
+const TOPICS: [(&str, &str); 12] = [
     ("/spwi/config", "json"),
     ("/spwi/in/detections", BINCODE),
     ("/spwi/in/embedding", BINCODE),
     ("/spwi/in/vote", BINCODE),
+    ("/spwi/in/ballots", BINCODE),
     ("/spwi/in/decision", BINCODE),
     ("/spwi/in/membership", "json"),
     ("/spwi/in/poll", BINCODE),
     ("/spwi/out/embedding", BINCODE),
     ("/spwi/out/vote", BINCODE),
+    ("/spwi/out/ballots", BINCODE),
     ("/spwi/out/decision", BINCODE),
 ];
 
@@ -100,6 +102,7 @@ impl Recorder {
             Input::Frame(m) => self.write("/spwi/in/detections", now, &encode(m)),
             Input::Embedding(m) => self.write("/spwi/in/embedding", now, &encode(m)),
             Input::Vote(m) => self.write("/spwi/in/vote", now, &encode(m)),
+            Input::Ballots(m) => self.write("/spwi/in/ballots", now, &encode(m)),
             Input::Decision(m) => self.write("/spwi/in/decision", now, &encode(m)),
             Input::MemberJoined(r) | Input::MemberLeft(r) => {
                 let alive = matches!(input, Input::MemberJoined(_));
@@ -114,6 +117,7 @@ impl Recorder {
         match output {
             Output::Embedding(m) => self.write("/spwi/out/embedding", now, &encode(m)),
             Output::Vote(m) => self.write("/spwi/out/vote", now, &encode(m)),
+            Output::Ballots(m) => self.write("/spwi/out/ballots", now, &encode(m)),
             Output::Decision(m) => self.write("/spwi/out/decision", now, &encode(m)),
         }
     }
@@ -150,6 +154,7 @@ pub fn read(path: &Path) -> Result<Recording> {
             "/spwi/in/detections" => inputs.push((now, Input::Frame(decode(d).with_context(ctx)?))),
             "/spwi/in/embedding" => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
             "/spwi/in/vote" => inputs.push((now, Input::Vote(decode(d).with_context(ctx)?))),
+            "/spwi/in/ballots" => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
             "/spwi/in/decision" => inputs.push((now, Input::Decision(decode(d).with_context(ctx)?))),
             "/spwi/in/membership" => {
                 let r: MembershipRecord = serde_json::from_slice(d).with_context(ctx)?;
@@ -158,6 +163,7 @@ pub fn read(path: &Path) -> Result<Recording> {
             "/spwi/in/poll" => inputs.push((now, Input::Poll)),
             "/spwi/out/embedding" => outputs.push(Output::Embedding(decode(d).with_context(ctx)?)),
             "/spwi/out/vote" => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
+            "/spwi/out/ballots" => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
             "/spwi/out/decision" => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
             other => bail!("{}: unknown topic {other:?} (not a spwi recording?)", path.display()),
         }

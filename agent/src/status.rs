@@ -35,6 +35,10 @@ pub struct Status {
     pub recent_decisions: VecDeque<RecentDecision>,
     /// Instance ids of other live daemons that use this robot's id.
     pub duplicate_robot_id: Vec<u64>,
+    /// Our camera repeats the same worker detection: set aside, not voting.
+    pub feed_stale: bool,
+    /// Peers whose feeds repeat themselves: left out of the tick until they change.
+    pub stale_peers: Vec<RobotId>,
     pub metrics: Metrics,
 }
 

@@ -12,8 +12,9 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 /// Bumped on every incompatible change of any payload (2: robot pose in the detection
-/// frame, worker estimate and landmarks in the embedding message).
-pub const PROTOCOL_VERSION: u16 = 2;
+/// frame, worker estimate and landmarks in the embedding message; 3: relayed ballots,
+/// the ballot digest in the decision).
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -57,6 +58,7 @@ message!(DetectionFrame, "detections", robot);
 message!(EmbeddingMsg, "embedding", robot);
 message!(VoteMsg, "vote", robot);
 message!(DecisionMsg, "decision", robot);
+message!(BallotsMsg, "ballots", robot);
 message!(TruthMsg, "truth");
 
 /// Why bytes were refused. Every variant names what was wrong.
@@ -188,6 +190,22 @@ mod tests {
         let e = decode::<EmbeddingMsg>(&b).unwrap_err();
         assert!(matches!(e, DecodeError::UnknownVersion { got: 1, .. }), "{e}");
         assert!(e.to_string().contains("protocol version 1"), "{e}");
+    }
+
+    #[test]
+    fn relayed_ballots_must_be_of_their_tick_and_one_per_origin() {
+        let ballots = |votes| BallotsMsg { robot: RobotId::new("r2").unwrap(), instance: 3, tick: 42, votes };
+        let ok = ballots(vec![vote(), VoteMsg { robot: RobotId::new("r2").unwrap(), ..vote() }]);
+        assert_eq!(decode_from::<BallotsMsg>(&encode(&ok), &ok.robot).unwrap(), ok);
+        let other_tick = ballots(vec![VoteMsg { tick: 41, ..vote() }]);
+        let e = decode::<BallotsMsg>(&encode(&other_tick)).unwrap_err().to_string();
+        assert!(e.contains("votes.tick") && e.contains("tick 41"), "{e}");
+        let twice = ballots(vec![vote(), vote()]);
+        let e = decode::<BallotsMsg>(&encode(&twice)).unwrap_err().to_string();
+        assert!(e.contains("two votes from r1"), "{e}");
+        let mut bad = ballots(vec![vote()]);
+        bad.votes[0].steps[0].class = 9;
+        assert!(matches!(decode::<BallotsMsg>(&encode(&bad)), Err(DecodeError::Invalid { .. })));
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! | `spwi/<fleet>/robot/<robot>/embedding`   | [`EmbeddingMsg`]                | agent          |
 //! | `spwi/<fleet>/robot/<robot>/vote`        | [`VoteMsg`]                     | agent          |
 //! | `spwi/<fleet>/robot/<robot>/decision`    | [`DecisionMsg`]                 | agent          |
+//! | `spwi/<fleet>/robot/<robot>/ballots`     | [`BallotsMsg`] (relayed votes)  | agent          |
 //! | `spwi/<fleet>/alive/<robot>`             | liveliness token (no payload)   | agent          |
 //! | `spwi/<fleet>/world/truth`               | [`TruthMsg`]                    | simulated world |
 //!
@@ -13,6 +14,7 @@
 //! [`EmbeddingMsg`]: crate::EmbeddingMsg
 //! [`VoteMsg`]: crate::VoteMsg
 //! [`DecisionMsg`]: crate::DecisionMsg
+//! [`BallotsMsg`]: crate::BallotsMsg
 //! [`TruthMsg`]: crate::TruthMsg
 
 use crate::id::{FleetId, RobotId};
@@ -26,10 +28,11 @@ pub enum Topic {
     Embedding,
     Vote,
     Decision,
+    Ballots,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 4] = [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision];
+    pub const ALL: [Topic; 5] = [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Ballots];
 
     pub fn as_str(self) -> &'static str {
         match self {
@@ -37,6 +40,7 @@ impl Topic {
             Topic::Embedding => "embedding",
             Topic::Vote => "vote",
             Topic::Decision => "decision",
+            Topic::Ballots => "ballots",
         }
     }
 

@@ -354,6 +354,9 @@ pub struct DecisionMsg {
     /// How many members were live when deciding.
     pub live_members: u32,
     pub decided_by: DecidedBy,
+    /// A digest of the ballots counted (origin, visibility and every step, in robot
+    /// order): two robots that decided on the same ballots name the same digest.
+    pub digest: u64,
 }
 
 impl Validate for DecisionMsg {
@@ -367,6 +370,39 @@ impl Validate for DecisionMsg {
         }
         if self.voters.len() > MAX_MEMBERS {
             return Err(invalid("voters", format!("{} voters, at most {MAX_MEMBERS}", self.voters.len())));
+        }
+        Ok(())
+    }
+}
+
+/// The ballots a robot holds for one tick, its own and those it heard from peers,
+/// published partway through the tick so that a peer that lost one of them on its own
+/// link still counts it. Each vote keeps its origin; `robot` is the relaying robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BallotsMsg {
+    pub robot: RobotId,
+    pub instance: u64,
+    pub tick: u64,
+    pub votes: Vec<VoteMsg>,
+}
+
+impl Validate for BallotsMsg {
+    fn validate(&self) -> Result<(), Invalid> {
+        if self.votes.len() > MAX_MEMBERS {
+            return Err(invalid("votes", format!("{} votes, at most {MAX_MEMBERS}", self.votes.len())));
+        }
+        let mut origins = std::collections::BTreeSet::new();
+        for v in &self.votes {
+            v.validate()?;
+            if v.tick != self.tick {
+                return Err(invalid(
+                    "votes.tick",
+                    format!("a vote for tick {} in the ballots of tick {}", v.tick, self.tick),
+                ));
+            }
+            if !origins.insert(&v.robot) {
+                return Err(invalid("votes.robot", format!("two votes from {}", v.robot)));
+            }
         }
         Ok(())
     }

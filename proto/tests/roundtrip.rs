@@ -79,8 +79,17 @@ proptest! {
     #[test]
     fn decisions_round_trip(robot in robot(), tick in any::<u64>(), voters in prop::collection::vec(robot(), 0..10),
                             steps in prop::collection::vec((0u8..4, finite()).prop_map(|(class, score)| TeamStep { class, score }), 0..30)) {
-        let m = DecisionMsg { robot, instance: 1, tick, steps, voters, live_members: 3, decided_by: DecidedBy::Deadline };
+        let m = DecisionMsg { robot, instance: 1, tick, steps, voters, live_members: 3, decided_by: DecidedBy::Deadline, digest: tick.rotate_left(7) };
         prop_assert_eq!(decode::<DecisionMsg>(&encode(&m)).unwrap(), m);
+    }
+
+    #[test]
+    fn relayed_ballots_round_trip(robot in robot(), tick in any::<u64>(), votes in prop::collection::vec((steps(), any::<u32>()), 0..6)) {
+        let votes = votes.into_iter().enumerate().map(|(i, (steps, visibility))| VoteMsg {
+            robot: RobotId::new(format!("o{i}")).unwrap(), instance: i as u64, tick, steps, visibility,
+        }).collect();
+        let m = BallotsMsg { robot: robot.clone(), instance: 2, tick, votes };
+        prop_assert_eq!(decode_from::<BallotsMsg>(&encode(&m), &robot).unwrap(), m);
     }
 
     #[test]
@@ -89,6 +98,7 @@ proptest! {
         let _ = decode::<EmbeddingMsg>(&bytes);
         let _ = decode::<VoteMsg>(&bytes);
         let _ = decode::<DecisionMsg>(&bytes);
+        let _ = decode::<BallotsMsg>(&bytes);
         let _ = decode::<TruthMsg>(&bytes);
     }
 

@@ -16,5 +16,6 @@ fuzz_target!(|data: &[u8]| {
     check::<EmbeddingMsg>(data);
     check::<VoteMsg>(data);
     check::<DecisionMsg>(data);
+    check::<BallotsMsg>(data);
     check::<TruthMsg>(data);
 });

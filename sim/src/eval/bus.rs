@@ -126,6 +126,7 @@ impl Bus {
         let input = match o {
             Output::Embedding(e) => Input::Embedding(e.clone()),
             Output::Vote(v) => Input::Vote(v.clone()),
+            Output::Ballots(b) => Input::Ballots(b.clone()),
             Output::Decision(d) => Input::Decision(d.clone()),
         };
         for to in 0..self.engines.len() {

@@ -43,6 +43,10 @@ pub struct EvalArgs {
     /// Mean delay of a message between robots, ms (default: loopback-like, 0.5 ms).
     #[arg(long, default_value_t = 0.0)]
     pub delay: f64,
+    /// The robots' settings: the `[tick]` section of this agent config (relays, stale
+    /// feeds, deadlines, consensus weights) instead of the daemon's defaults.
+    #[arg(long, value_name = "FILE", conflicts_with = "all")]
+    pub agent_config: Option<PathBuf>,
     /// Write every figure as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -74,6 +78,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         loss,
         faulty,
         delay,
+        agent_config,
         json,
         all,
         markdown,
@@ -93,6 +98,14 @@ pub fn main(a: EvalArgs) -> Result<()> {
             "--dropouts {dropouts} / --faulty {faulty}: must leave at least one of the {robots} robots working"
         );
     }
+    let tick = match &agent_config {
+        Some(path) => {
+            let c = spwi_agent::config::AgentConfig::from_file(path)?;
+            c.validate().with_context(|| format!("config {}", path.display()))?;
+            c.tick
+        }
+        None => Default::default(),
+    };
     let root = std::path::Path::new("models");
     if all {
         let settings = crate::eval::studies::Settings {
@@ -149,6 +162,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         seed,
         ticks,
         faults: crate::eval::Faults { dropouts, loss, faulty, delay_ms: delay },
+        tick,
     })?;
     crate::eval::print(&report);
     if let Some(path) = json {

@@ -10,11 +10,10 @@ use super::observers::{Observers, Predictions};
 use super::score::{confuse, Confusion, Tally};
 use super::EvalOptions;
 use anyhow::Result;
-use spwi_agent::config::TickConfig;
 use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
 use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
-use spwi_proto::{DetectionFrame, RobotId, NUM_CLASSES};
+use spwi_proto::{encode, DetectionFrame, RobotId, NUM_CLASSES};
 use spwi_world::layout::Layout;
 use spwi_world::world::{stream, Stream, World};
 use std::time::Duration;
@@ -28,6 +27,8 @@ pub struct Tallies {
     pub gnn: Tally,
     pub ego: Tally,
     pub collective: Tally,
+    /// The collective GRU of the robots whose camera works (every robot without faults).
+    pub healthy_collective: Tally,
     pub consensus: Tally,
     /// The team decision on every tick, a tick without one (nobody saw the worker)
     /// counting as wrong: what the fleet as a whole gets right.
@@ -48,6 +49,9 @@ pub struct Tallies {
     pub ticks: u64,
     /// Robot frames processed.
     pub frames: u64,
+    /// Messages the robots published, and their encoded bytes.
+    pub messages: u64,
+    pub bytes: u64,
 }
 
 impl Tallies {
@@ -56,6 +60,7 @@ impl Tallies {
             (&mut self.gnn, &o.gnn),
             (&mut self.ego, &o.ego),
             (&mut self.collective, &o.collective),
+            (&mut self.healthy_collective, &o.healthy_collective),
             (&mut self.consensus, &o.consensus),
             (&mut self.team_all_ticks, &o.team_all_ticks),
             (&mut self.cvm, &o.cvm),
@@ -89,6 +94,8 @@ impl Tallies {
         self.agreed_ticks += o.agreed_ticks;
         self.ticks += o.ticks;
         self.frames += o.frames;
+        self.messages += o.messages;
+        self.bytes += o.bytes;
     }
 }
 
@@ -110,11 +117,11 @@ struct TickRecord {
     decisions: Vec<Vec<u8>>,
 }
 
-/// The daemon's own timing (`[tick]` defaults) for robot `slot` of an evaluation.
+/// The daemon's own engine, with the evaluation's `[tick]` settings, for robot `slot`.
 fn engine(slot: usize, o: &EvalOptions, layout: &Layout) -> Result<Engine> {
     let id = RobotId::new(format!("r{slot}"))?;
     let camera = crate::calibration::of(&layout.camera);
-    let cfg = EngineConfig::new(id, slot as u64 + 1, &TickConfig::default(), &camera, &o.models.manifest);
+    let cfg = EngineConfig::new(id, slot as u64 + 1, &o.tick, &camera, &o.models.manifest);
     Ok(Engine::new(cfg, o.models.inference(TemporalModel::Collective)?))
 }
 
@@ -184,12 +191,21 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let mut embeddings: Vec<Option<Vec<f32>>> = vec![None; n];
         let mut votes: Vec<Option<Vec<u8>>> = vec![None; n];
         let mut decided: Vec<Option<Vec<u8>>> = vec![None; n];
-        bus.run_until(now + TICK, |slot, _, out| match out {
-            Output::Embedding(e) if e.tick == tick => embeddings[slot] = e.embedding.clone(),
-            Output::Vote(v) if v.tick == tick => votes[slot] = Some(v.steps.iter().map(|s| s.class).collect()),
-            Output::Decision(d) if d.tick == tick => decided[slot] = Some(d.steps.iter().map(|s| s.class).collect()),
-            _ => {}
+        let (mut messages, mut bytes) = (0, 0);
+        bus.run_until(now + TICK, |slot, _, out| {
+            messages += 1;
+            bytes += encoded_len(out);
+            match out {
+                Output::Embedding(e) if e.tick == tick => embeddings[slot] = e.embedding.clone(),
+                Output::Vote(v) if v.tick == tick => votes[slot] = Some(v.steps.iter().map(|s| s.class).collect()),
+                Output::Decision(d) if d.tick == tick => {
+                    decided[slot] = Some(d.steps.iter().map(|s| s.class).collect())
+                }
+                _ => {}
+            }
         });
+        tallies.messages += messages;
+        tallies.bytes += bytes as u64;
         let mut per_robot = Vec::with_capacity(n);
         let mut decisions = Vec::with_capacity(n);
         for (slot, obs) in observers.iter_mut().enumerate() {
@@ -229,6 +245,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(c) = &p.collective {
                 tallies.collective.add(c, truth);
+                if *slot >= o.faults.faulty {
+                    tallies.healthy_collective.add(c, truth);
+                }
                 if close {
                     tallies.close_pair.collective.add(c, truth);
                 }
@@ -268,6 +287,16 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
     }
     Ok(tallies)
+}
+
+/// The bytes of an output as the daemon would publish it.
+fn encoded_len(o: &Output) -> usize {
+    match o {
+        Output::Embedding(m) => encode(m).len(),
+        Output::Vote(m) => encode(m).len(),
+        Output::Ballots(m) => encode(m).len(),
+        Output::Decision(m) => encode(m).len(),
+    }
 }
 
 /// A stuck camera: once it has seen the worker, it keeps returning that frame (with the

@@ -31,6 +31,7 @@ use crate::dataset::episode_seed;
 use anyhow::{bail, Context, Result};
 use score::{estimate, Accuracy, Confusion, Tally};
 use serde::Serialize;
+use spwi_agent::config::TickConfig;
 use spwi_agent::manifest::Manifest;
 use spwi_agent::model::ModelSet;
 use spwi_world::generate::NamedLayout;
@@ -80,6 +81,9 @@ pub struct EvalOptions {
     /// Ticks per episode (10 per second).
     pub ticks: u32,
     pub faults: Faults,
+    /// The robots' `[tick]` settings (relay, stale feeds, deadlines): the daemon's
+    /// defaults unless an agent config says otherwise.
+    pub tick: TickConfig,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -104,6 +108,7 @@ pub struct Report {
     pub model_set: String,
     pub floors: String,
     pub faults: Faults,
+    pub tick: TickConfig,
     /// gnn (t only), ego, collective, consensus (collective votes + consensus, on the
     /// ticks some robot decided), team_all_ticks (the same decision over every tick, no
     /// decision counting as wrong), cvm, cnn1d. Each model is scored on the ticks where
@@ -118,6 +123,10 @@ pub struct Report {
     /// Share of ticks on which the team had a decision (some robot saw the worker or,
     /// with a relation set, still tracked it).
     pub coverage: f64,
+    /// Messages each robot published per tick (embedding, vote, relayed ballots,
+    /// decision), and their bytes as the codec writes them.
+    pub messages_per_robot_tick: f64,
+    pub bytes_per_robot_tick: f64,
     /// Rows: true class; columns: predicted class (at t).
     pub confusion: BTreeMap<&'static str, Confusion>,
     /// Predictions at t scored for the collective GRU (robot-ticks seeing the worker).
@@ -178,6 +187,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     models.insert("gnn", of(&|e| &e.gnn));
     models.insert("ego", of(&|e| &e.ego));
     models.insert("collective", of(&|e| &e.collective));
+    models.insert("healthy_collective", of(&|e| &e.healthy_collective));
     models.insert("consensus", of(&|e| &e.consensus));
     models.insert("team_all_ticks", of(&|e| &e.team_all_ticks));
     models.insert("cvm", of(&|e| &e.cvm));
@@ -210,11 +220,14 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         model_set: m.name.clone(),
         floors: o.floors_name.clone(),
         faults: o.faults.clone(),
+        tick: o.tick.clone(),
         models,
         close_pair,
         per_robot,
         agreement: if all.decided_ticks == 0 { 0.0 } else { all.agreed_ticks as f64 / all.decided_ticks as f64 },
         coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
+        messages_per_robot_tick: all.messages as f64 / all.frames.max(1) as f64,
+        bytes_per_robot_tick: all.bytes as f64 / all.frames.max(1) as f64,
         confusion: BTreeMap::from([("ego", all.confusion_ego), ("collective", all.confusion_collective)]),
         samples: all.collective.samples(),
         seconds,
@@ -332,9 +345,11 @@ pub fn print(r: &Report) {
         );
     }
     println!(
-        "  agreement {:.1}% · coverage {:.1}% · {} scored predictions · {:.1} s ({:.0} µs per robot frame)",
+        "  agreement {:.1}% · coverage {:.1}% · {:.2} messages, {:.0} bytes per robot tick · {} scored predictions · {:.1} s ({:.0} µs per robot frame)",
         100.0 * r.agreement,
         100.0 * r.coverage,
+        r.messages_per_robot_tick,
+        r.bytes_per_robot_tick,
         r.samples,
         r.seconds,
         r.per_frame_us
@@ -362,6 +377,7 @@ mod tests {
             seed: 5,
             ticks: 60,
             faults,
+            tick: TickConfig::default(),
         }
     }
 
@@ -391,8 +407,40 @@ mod tests {
     fn without_faults_every_robot_reaches_the_same_decision() {
         let r = run(&options(fixture(), Faults::none())).unwrap();
         assert_eq!(r.agreement, 1.0, "same votes, same deterministic consensus");
-        let lossy = run(&options(fixture(), Faults { loss: 0.3, ..Faults::none() })).unwrap();
-        assert!(lossy.agreement < 1.0, "robots holding different votes disagree sometimes");
+    }
+
+    #[test]
+    fn relayed_ballots_keep_the_robots_agreeing_when_messages_are_lost() {
+        let lossy = Faults { loss: 0.3, ..Faults::none() };
+        let mut plain = options(fixture(), lossy.clone());
+        plain.tick.relay_ms = 0;
+        let plain = run(&plain).unwrap();
+        let relayed = run(&options(fixture(), lossy)).unwrap();
+        assert!(plain.agreement < 0.95, "without relays, robots holding different votes disagree: {}", plain.agreement);
+        assert!(
+            relayed.agreement > plain.agreement + 0.5 * (1.0 - plain.agreement),
+            "relays halve the disagreement at least: {} -> {}",
+            plain.agreement,
+            relayed.agreement
+        );
+        assert!(relayed.messages_per_robot_tick > plain.messages_per_robot_tick, "relays cost messages");
+    }
+
+    #[test]
+    fn a_stuck_camera_is_set_aside() {
+        let stuck = Faults { faulty: 1, ..Faults::none() };
+        let mut unchecked = options(fixture(), stuck.clone());
+        unchecked.tick.stale_after_frames = 0;
+        let unchecked = run(&unchecked).unwrap();
+        let checked = run(&options(fixture(), stuck)).unwrap();
+        // Robot 0 votes on every tick from its stuck frame unless its engine sets the
+        // frame aside; the other robots see what they see either way.
+        assert!(
+            checked.samples < unchecked.samples,
+            "robot 0's frozen frames are not scored as seeing the worker: {} vs {}",
+            checked.samples,
+            unchecked.samples
+        );
     }
 
     #[test]
