@@ -9,13 +9,19 @@ checks, through each agent's /status (read from the host over the Docker network
 3. `--scale agent=6`: the newcomers (and the killed one, restarted) are counted and vote;
 4. `docker network disconnect` one agent: the others drop it within 1.5 s; after
    `docker network connect` it is counted again;
-5. the router stops: the connected agents keep deciding, all still counted.
+5. the router stops: the connected agents keep deciding, all still counted;
+6. real packet loss (as root): 10 % and then 30 % of the packets reaching every agent
+   dropped (iptables' statistic match in each container's network namespace): the
+   fleet keeps deciding; agreement is measured;
+7. a fresh fleet whose world freezes one robot's camera (tests/compose-stuck.yaml):
+   that robot reports its feed stale and leaves the vote, the fleet keeps deciding.
 
 Prints each measured time. Tears the project down at the end, even on failure.
 Only the Python standard library and the docker CLI are needed.
 """
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -32,7 +38,12 @@ COMPOSE = (["docker", "compose"] if _plugin else ["docker-compose"]) + [
     os.path.join(ROOT, "deploy", "compose.yaml"),
 ]
 NETWORK = f"{PROJECT}_fleet"
+STUCK = os.path.join(ROOT, "tests", "compose-stuck.yaml")
 KILL_BUDGET_S = 1.5
+# Real packet loss: drop probability -> least agreement accepted. TCP resends what is
+# dropped, so a lost packet is a message late by a retransmission timeout (>= 200 ms,
+# past the 60 ms decision deadline), not a message lost.
+DROPS = {0.1: 0.95, 0.3: 0.80}
 figures = {}
 
 
@@ -117,6 +128,75 @@ def keeps_deciding(ips, members):
         if d["live_members"] != members:
             fail(f"{a['robot']} decided with {d['live_members']} live members, expected {members}")
     return after
+
+
+def decisions_advance(ips, seconds=2.0):
+    """Every agent decided at least 5 more ticks per second over `seconds`."""
+    before = [status(ip)["last_decision"]["tick"] for ip in ips]
+    time.sleep(seconds)
+    for ip, b in zip(ips, before):
+        s = status(ip)
+        if s is None:
+            fail(f"the agent at {ip} stopped answering /status")
+        if s["last_decision"]["tick"] < b + 5 * seconds:
+            fail(f"{s['robot']} decided only up to tick {s['last_decision']['tick']} {seconds} s after {b}")
+
+
+def drop_packets(containers, probability):
+    """Drops `probability` of the packets reaching each container (its /status port
+    exempt, so the test can still read it); probability 0 removes the rules."""
+    for c in containers:
+        pid = sh("docker", "inspect", "-f", "{{.State.Pid}}", c)
+        ipt = ["nsenter", "-t", pid, "-n", "iptables"]
+        sh(*ipt, "-F", "INPUT")
+        if probability > 0:
+            sh(*ipt, "-A", "INPUT", "-p", "tcp", "--dport", "9000", "-j", "ACCEPT")
+            sh(*ipt, "-A", "INPUT", "-m", "statistic", "--mode", "random",
+               "--probability", str(probability), "-j", "DROP")
+
+
+def real_packet_loss():
+    if os.geteuid() != 0 or not (shutil.which("nsenter") and shutil.which("iptables")):
+        print("!!!!!!!! SKIPPED: real packet loss (needs root, nsenter and iptables) !!!!!!!!")
+        return
+    ag = agents()
+    ips = [ip for _, ip in ag.values()]
+    try:
+        for p, least in DROPS.items():
+            drop_packets(ag, p)
+            decisions_advance(ips)
+            share, ticks = agreement(ips, seconds=10.0)
+            print(f"{p:.0%} of packets dropped at every agent: same decision on {share:.1%} of {ticks} common ticks")
+            figures[f"agreement_drop_{int(p * 100)}"] = round(share, 4)
+            if share < least:
+                fail(f"with {p:.0%} packet drop the agents agree on only {share:.1%} of ticks (< {least:.0%})")
+    finally:
+        drop_packets(ag, 0)
+
+
+def stuck_camera():
+    compose("down", "--timeout", "1", "--remove-orphans")
+    sh(*COMPOSE, "-f", STUCK, "up", "-d", "--scale", "agent=4")
+    ips = [ip for _, ip in agents().values()]
+    wait_until("4 agents counting 4 members", all_count(ips, 4), 60)
+
+    def stuck_one():
+        sts = [status(ip) for ip in ips]
+        return next((s["robot"] for s in sts if s and s["feed_stale"]), None)
+
+    robot, took = wait_until("one agent reporting its camera's feed as stale", stuck_one, 120, poll=0.2)
+    print(f"stuck camera: {robot} sets its frozen feed aside ({took:.1f} s after the fleet formed)")
+    time.sleep(1.0)
+    decisions_advance(ips)
+    for ip in ips:
+        s = status(ip)
+        if s["robot"] != robot and robot in (s["last_decision"] or {}).get("voters", []):
+            fail(f"{s['robot']} still counts {robot}'s vote after its feed went stale")
+    share, ticks = agreement(ips, seconds=5.0)
+    print(f"stuck camera: all 4 keep deciding, same decision on {share:.1%} of {ticks} common ticks")
+    figures["agreement_stuck_camera"] = round(share, 4)
+    if share < 0.95:
+        fail(f"with one stuck camera the agents agree on only {share:.1%} of ticks")
 
 
 def main():
@@ -206,6 +286,12 @@ def main():
     share, ticks = agreement(ips, seconds=2.0)
     print(f"router stopped: all 6 still decide, same decision on {share:.1%} of {ticks} common ticks")
     figures["agreement_without_router"] = round(share, 4)
+
+    # 6. real packet loss on every agent's interface
+    real_packet_loss()
+
+    # 7. a camera stuck on one frame
+    stuck_camera()
     print("figures: " + json.dumps(figures))
 
 

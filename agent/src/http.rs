@@ -61,7 +61,7 @@ async fn answer(mut stream: tokio::net::TcpStream, status: SharedStatus) -> std:
             (200, "application/json", s.unwrap_or_default())
         }
         ("GET", "/metrics") => {
-            let text = status.lock().map(|s| s.metrics.render(&s.robot, s.members.len())).unwrap_or_default();
+            let text = status.lock().map(|s| s.prometheus()).unwrap_or_default();
             (200, "text/plain; version=0.0.4", text)
         }
         ("GET", _) => (404, "text/plain", "not found: try /healthz, /status or /metrics\n".to_owned()),

@@ -5,6 +5,7 @@ use crate::metrics::Metrics;
 use serde::Serialize;
 use spwi_proto::{DecisionMsg, RobotId};
 use std::collections::VecDeque;
+use std::fmt::Write;
 use std::sync::{Arc, Mutex};
 
 /// Decisions kept in `/status` (10 s at 10 Hz): enough to compare robots' decisions
@@ -51,5 +52,24 @@ impl Status {
         self.recent_decisions.extend(decided);
         let excess = self.recent_decisions.len().saturating_sub(RECENT_DECISIONS);
         self.recent_decisions.drain(..excess);
+    }
+
+    /// `/metrics`: the counters and histograms, then the state of the feeds.
+    pub fn prometheus(&self) -> String {
+        let mut o = self.metrics.render(&self.robot, self.members.len());
+        let l = format!("robot=\"{}\"", self.robot);
+        let _ = writeln!(
+            o,
+            "# HELP spwi_feed_stale 1 while our camera repeats the same worker detection (set aside)\n# TYPE spwi_feed_stale gauge\nspwi_feed_stale{{{l}}} {}",
+            u8::from(self.feed_stale)
+        );
+        let _ = writeln!(
+            o,
+            "# HELP spwi_peer_feed_stale 1 for each peer whose feed repeats itself (left out)\n# TYPE spwi_peer_feed_stale gauge"
+        );
+        for p in &self.stale_peers {
+            let _ = writeln!(o, "spwi_peer_feed_stale{{{l},peer=\"{p}\"}} 1");
+        }
+        o
     }
 }

@@ -363,6 +363,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
             layout: opts.layout.clone(),
             zenoh: peer()?,
             tick: Duration::from_millis(100),
+            stuck_slot: None,
         },
         world_rx,
     ));

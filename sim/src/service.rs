@@ -2,8 +2,11 @@
 //! liveliness tokens; each robot that joins takes the next free robot slot of the
 //! layout (its spawn pose and patrol), one that leaves frees it. Every tick (10 Hz) it
 //! publishes each live robot's detection frame, exactly as a detector node on that
-//! robot would, and the ground truth for scoring.
+//! robot would, and the ground truth for scoring. `--stuck-slot S` freezes the camera
+//! of whichever robot holds slot S on its first frame showing the worker (a fault for
+//! end-to-end tests; robot ids in a container fleet are not known in advance, slots are).
 
+use crate::stuck_camera::StuckCamera;
 use crate::world_args::WorldArgs;
 use anyhow::{anyhow, Result};
 use spwi_agent::cli::{init_tracing, spawn_signal_handler};
@@ -25,6 +28,8 @@ pub struct WorldOptions {
     pub layout: Layout,
     pub zenoh: zenoh::Config,
     pub tick: Duration,
+    /// The layout slot whose camera is stuck, if any.
+    pub stuck_slot: Option<usize>,
 }
 
 /// Robot id → layout slot, giving each newcomer the lowest free slot.
@@ -78,6 +83,7 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
         .map_err(|e| anyhow!(e))?;
     let mut world = World::new(opts.layout, opts.scenario, opts.seed, 0);
     let mut slots = Slots::new(world.robots.len());
+    let mut stuck = StuckCamera::default();
     let truth_key = keys::truth(&opts.fleet);
     let mut interval = tokio::time::interval(opts.tick);
     interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -100,7 +106,10 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
                 world.step();
                 let assigned = slots.assigned();
                 for (slot, robot) in &assigned {
-                    let frame = world.observe(*slot, robot);
+                    let mut frame = world.observe(*slot, robot);
+                    if opts.stuck_slot == Some(*slot) {
+                        frame = stuck.pass(frame);
+                    }
                     let key = keys::robot_topic(&opts.fleet, robot, Topic::Detections);
                     if let Err(e) = session.put(&key, encode(&frame)).await {
                         tracing::warn!("publishing {key}: {e}");
@@ -132,19 +141,31 @@ pub struct WorldServiceArgs {
     /// Tick period in milliseconds.
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
     pub tick_ms: u64,
+    /// Freeze the camera of the robot in this layout slot on its first frame that shows
+    /// the worker (a fault to test the fleet with).
+    #[arg(long, value_name = "SLOT")]
+    pub stuck_slot: Option<usize>,
 }
 
 /// `spwi-sim world`: parses nothing more, runs the tool.
 pub fn main(a: WorldServiceArgs) -> Result<()> {
-    let WorldServiceArgs { fleet, world, seed, zenoh_config, cfg, tick_ms } = a;
+    let WorldServiceArgs { fleet, world, seed, zenoh_config, cfg, tick_ms, stuck_slot } = a;
     init_tracing(LogFormat::Human);
+    let floor = world.floor()?;
+    if let Some(s) = stuck_slot {
+        if s >= floor.layout.robots.len() {
+            anyhow::bail!("--stuck-slot {s}: the floor has robot slots 0..{}", floor.layout.robots.len());
+        }
+        tracing::warn!(slot = s, "the camera of the robot in slot {s} will freeze on its first sight of the worker");
+    }
     let opts = crate::service::WorldOptions {
         fleet,
         scenario: world.scenario,
         seed,
-        layout: world.floor()?.layout,
+        layout: floor.layout,
         zenoh: spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?,
         tick: Duration::from_millis(tick_ms),
+        stuck_slot,
     };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     rt.block_on(async {

@@ -46,6 +46,8 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         assert!(status["last_decision"]["tick"].as_u64().unwrap() > 0);
         assert!(status["fixture_models"].as_bool().unwrap());
         assert!(status["metrics"]["decisions"].as_u64().unwrap() > 0);
+        assert_eq!(status["feed_stale"], false);
+        assert_eq!(status["stale_peers"], serde_json::json!([]));
 
         let (code, body) = tokio::task::spawn_blocking(move || get(addr, "/metrics")).await.unwrap();
         assert_eq!(code, 200);
@@ -54,6 +56,8 @@ async fn status_metrics_and_health_are_served_while_deciding() {
             "spwi_members{robot=\"h0\"} 2",
             "stage=\"gcn\"",
             "stage=\"frame_to_decision\"",
+            "spwi_feed_stale{robot=\"h0\"} 0",
+            "spwi_decided_on_fewer_ballots_total{robot=\"h0\"}",
         ] {
             assert!(body.contains(needle), "/metrics lacks {needle}:\n{body}");
         }

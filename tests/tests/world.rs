@@ -45,6 +45,7 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
             layout: Layout::default_layout(),
             zenoh: hub.peer_config(),
             tick: Duration::from_millis(100),
+            stuck_slot: None,
         };
         let world = tokio::spawn(service::run(opts, rx));
 
@@ -69,6 +70,65 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
         tokio::time::sleep(Duration::from_millis(500)).await;
         let last = truths.lock().unwrap().last().cloned().unwrap();
         assert_eq!(last.robots.len(), 2, "{:?}", last.robots);
+
+        stop_world.send(true).unwrap();
+        within!(10, "world to stop", world).unwrap().unwrap();
+        for a in agents {
+            a.stop().await;
+        }
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_robot_whose_camera_freezes_leaves_the_vote_and_the_others_carry_on() {
+    within!(90, "test", async {
+        let hub = Hub::start("stuckworld").await.unwrap();
+        let models = models();
+        let collector = Collector::start(&hub).await.unwrap();
+        let ids: Vec<_> = (0..3).map(|i| id(&format!("s{i}"))).collect();
+        let mut agents = Vec::new();
+        for r in &ids {
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+        }
+        let (stop_world, rx) = tokio::sync::watch::channel(false);
+        let opts = WorldOptions {
+            fleet: hub.fleet.clone(),
+            scenario: Scenario::Dynamic,
+            seed: 11,
+            layout: Layout::default_layout(),
+            zenoh: hub.peer_config(),
+            tick: Duration::from_millis(100),
+            stuck_slot: Some(0),
+        };
+        let world = tokio::spawn(service::run(opts, rx));
+        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(10)).await;
+
+        // Whichever robot holds slot 0 sees its feed freeze once it has seen the worker.
+        let stale = loop {
+            let stale: Vec<_> = agents
+                .iter()
+                .filter(|a| a.started.status.lock().unwrap().feed_stale)
+                .map(|a| a.robot.clone())
+                .collect();
+            if !stale.is_empty() {
+                break stale;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        };
+        assert_eq!(stale.len(), 1, "one camera is stuck: {stale:?}");
+        let frozen = &stale[0];
+        let from = collector.by_robot()[frozen].keys().last().copied().unwrap() + 2;
+        tokio::time::sleep(Duration::from_secs(2)).await;
+
+        // From then on nobody counts its vote, and every robot, it included, keeps deciding.
+        let by = collector.by_robot();
+        for r in &ids {
+            let after: Vec<&DecisionMsg> = by[r].range(from..).map(|(_, d)| d).collect();
+            assert!(after.len() >= 15, "{r} decided only {} ticks in 2 s", after.len());
+            assert!(after.iter().all(|d| !d.voters.contains(frozen)), "{r} counted {frozen}'s frozen vote");
+        }
+        let m = agents.iter().find(|a| &a.robot == frozen).unwrap().started.status.lock().unwrap().metrics.clone();
+        assert!(m.repeated_frames >= 15, "{m:?}");
 
         stop_world.send(true).unwrap();
         within!(10, "world to stop", world).unwrap().unwrap();

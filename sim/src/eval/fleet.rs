@@ -9,11 +9,12 @@ use super::bus::{Bus, Net};
 use super::observers::{Observers, Predictions};
 use super::score::{confuse, Confusion, Tally};
 use super::EvalOptions;
+use crate::stuck_camera::StuckCamera;
 use anyhow::Result;
 use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
 use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
-use spwi_proto::{encode, DetectionFrame, RobotId, NUM_CLASSES};
+use spwi_proto::{encode, RobotId, NUM_CLASSES};
 use spwi_world::layout::Layout;
 use spwi_world::world::{stream, Stream, World};
 use std::time::Duration;
@@ -147,7 +148,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         .map(|_| Observers::new(&o.models, crate::calibration::of(&layout.camera)))
         .collect::<Result<Vec<_>>>()?;
     let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
-    let mut stuck: Vec<Option<DetectionFrame>> = vec![None; n];
+    let mut stuck: Vec<StuckCamera> = (0..n).map(|_| StuckCamera::default()).collect();
     let mut intents = Vec::with_capacity(ticks + horizon);
     let mut records = Vec::with_capacity(ticks);
     let mut tallies = Tallies { per_robot: vec![Default::default(); n], ..Default::default() };
@@ -181,7 +182,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             let mut frame = world.observe(slot, &ids[slot]);
             if slot < o.faults.faulty {
-                frame = stuck_camera(&mut stuck[slot], frame);
+                frame = stuck[slot].pass(frame);
             }
             obs.see(&frame);
             bus.deliver(slot, Input::Frame(frame), now);
@@ -296,19 +297,5 @@ fn encoded_len(o: &Output) -> usize {
         Output::Vote(m) => encode(m).len(),
         Output::Ballots(m) => encode(m).len(),
         Output::Decision(m) => encode(m).len(),
-    }
-}
-
-/// A stuck camera: once it has seen the worker, it keeps returning that frame (with the
-/// current tick) — confident, plausible and wrong.
-fn stuck_camera(stuck: &mut Option<DetectionFrame>, frame: DetectionFrame) -> DetectionFrame {
-    match stuck {
-        Some(s) => DetectionFrame { tick: frame.tick, ..s.clone() },
-        None => {
-            if frame.human.is_some() {
-                *stuck = Some(frame.clone());
-            }
-            frame
-        }
     }
 }
