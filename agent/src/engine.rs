@@ -331,6 +331,7 @@ impl Engine {
             Input::MemberLeft(r) => {
                 self.live.remove(&r);
                 self.active.remove(&r);
+                self.peer_feeds.remove(&r); // a robot that comes back is judged afresh
                 self.advance_all(now, &mut out);
             }
             Input::Poll => self.advance_all(now, &mut out),
