@@ -444,6 +444,11 @@ impl Engine {
     /// A peer's relayed ballots: the votes we do not hold yet join the tick (never our
     /// own, never a stale peer's); for a tick already decided they are only counted.
     fn on_ballots(&mut self, b: BallotsMsg, now: Duration, out: &mut Vec<Output>) {
+        if b.robot == self.cfg.robot {
+            // Our own relay (or another daemon's with our id, which this notes).
+            self.accept_peer(&b.robot, b.instance, b.tick, now);
+            return;
+        }
         if let Some(ours) = self.decided.get(&b.tick) {
             let missed = b.votes.iter().filter(|v| v.robot != self.cfg.robot && !ours.voters.contains(&v.robot));
             self.metrics.late_relayed_ballots += missed.count() as u64;
