@@ -6,7 +6,7 @@
 //! ORT_DYLIB_PATH to include ONNX Runtime). `SPWI_BENCH_MODELS=DIR` picks a model set
 //! (default: models/default, the shipped trained set).
 
-use spwi_agent::consensus::{self, Ballot, Weights};
+use spwi_agent::consensus::{self, Ballot, Rule};
 use spwi_agent::engine::{Engine, EngineConfig, Input};
 use spwi_agent::graph::GraphBuilder;
 use spwi_agent::model::{Backend, ModelSet};
@@ -103,9 +103,12 @@ fn bench_backend(backend: Backend) {
     let votes: Vec<Vec<StepVote>> = (0..8).map(|_| vote::vote(&logits, 1.3)).collect();
     measure("vote + consensus (8 robots, H+1 steps)", 20_000, || {
         let v = vote::vote(black_box(&logits), 1.3);
-        let mut ballots: Vec<Ballot<'_>> =
-            ids.iter().zip(&votes).map(|(r, s)| Ballot { robot: r, visibility: 5, steps: s }).collect();
-        black_box((v, consensus::decide(&mut ballots, Weights { alpha: 0.5, beta: 0.5 })));
+        let mut ballots: Vec<Ballot<'_>> = ids
+            .iter()
+            .zip(&votes)
+            .map(|(r, s)| Ballot { robot: r, visibility: 5, trust: 0.9, quality: 0.8, steps: s })
+            .collect();
+        black_box((v, consensus::decide(&mut ballots, Rule::Trust)));
     });
     let mut engine = Engine::new(
         EngineConfig {
@@ -114,7 +117,8 @@ fn bench_backend(backend: Backend) {
             temporal: TemporalModel::Collective,
             embedding_wait: Duration::from_millis(30),
             decision_deadline: Duration::from_millis(60),
-            weights: Weights { alpha: 0.5, beta: 0.5 },
+            consensus: Rule::Trust,
+            trust: Default::default(),
             max_open_ticks: 64,
             camera: Default::default(),
             relay_after: None,
@@ -152,6 +156,8 @@ fn bench_codec() {
         tick: 7,
         steps: vec![StepVote { class: 2, confidence: 0.7 }; 21],
         visibility: 13,
+        trust: 0.9,
+        quality: 0.8,
     };
     let d = DecisionMsg {
         robot: f.robot.clone(),

@@ -37,14 +37,31 @@ pub struct TickConfig {
     /// A camera showing the same worker detection this many frames in a row is frozen:
     /// set aside until it changes (0: never).
     pub stale_after_frames: u32,
-    /// Weight of visibility in the vote; default: the model manifest's.
+    /// How votes become the decision: "paper" (normalised shares of visibility and
+    /// confidence) or "trust" (evidence weighted by each voter's record and view).
+    pub consensus: ConsensusRule,
+    /// Weight of visibility in the paper's rule; default: the model manifest's.
     pub alpha: Option<f32>,
-    /// Weight of confidence in the vote; default: the model manifest's.
+    /// Weight of confidence in the paper's rule; default: the model manifest's.
     pub beta: Option<f32>,
+    /// Decided ticks over which a voter's agreement with the others is averaged.
+    pub trust_window_ticks: u32,
+    /// Least trust a voter keeps, so that it can earn its trust back.
+    pub trust_floor: f32,
+    /// Peers trusted less than this leave the fusion of embeddings and worker tracks.
+    pub fuse_min_trust: f32,
     /// Most ticks in flight at once.
     pub max_open_ticks: usize,
     /// Capacity of the event queue between Zenoh and the tick loop.
     pub event_queue: usize,
+}
+
+/// The consensus rule (`crate::consensus`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ConsensusRule {
+    Paper,
+    Trust,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -86,8 +103,12 @@ impl Default for TickConfig {
             decision_deadline_ms: 60,
             relay_ms: 40,
             stale_after_frames: 5,
+            consensus: ConsensusRule::Trust,
             alpha: None,
             beta: None,
+            trust_window_ticks: 100,
+            trust_floor: 0.1,
+            fuse_min_trust: 0.5,
             max_open_ticks: 64,
             event_queue: 1024,
         }
@@ -192,6 +213,14 @@ impl AgentConfig {
         if t.alpha == Some(0.0) && t.beta == Some(0.0) {
             bail!("tick.alpha and tick.beta are both 0: at least one must weigh the votes");
         }
+        if !(1..=100_000).contains(&t.trust_window_ticks) {
+            bail!("tick.trust_window_ticks = {}: must be within 1..=100000", t.trust_window_ticks);
+        }
+        for (name, v) in [("tick.trust_floor", t.trust_floor), ("tick.fuse_min_trust", t.fuse_min_trust)] {
+            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                bail!("{name} = {v}: must be within 0..=1");
+            }
+        }
         if !(1..=10_000).contains(&t.max_open_ticks) {
             bail!("tick.max_open_ticks = {}: must be within 1..=10000", t.max_open_ticks);
         }
@@ -241,6 +270,13 @@ mod tests {
         assert!(e.contains("tick.relay_ms = 40") && e.contains("below tick.decision_deadline_ms (40)"), "{e}");
         let c: AgentConfig = toml::from_str("[tick]\ndecision_deadline_ms = 40\nrelay_ms = 0\n").unwrap();
         c.validate().expect("relaying nothing is allowed");
+        let c: AgentConfig = toml::from_str("[tick]\ntrust_floor = 1.5\n").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("tick.trust_floor = 1.5") && e.contains("0..=1"), "{e}");
+        let c: AgentConfig = toml::from_str("[tick]\nconsensus = \"paper\"\n").unwrap();
+        assert_eq!(c.tick.consensus, ConsensusRule::Paper);
+        let e = toml::from_str::<AgentConfig>("[tick]\nconsensus = \"loudest\"\n").unwrap_err().to_string();
+        assert!(e.contains("consensus") && e.contains("paper") && e.contains("trust"), "{e}");
         let c: AgentConfig = toml::from_str("[camera]\nheight_m = 0.02\n").unwrap();
         assert_eq!(c.camera.fov_deg, 90.0, "unset camera fields keep their defaults");
         let e = c.validate().unwrap_err().to_string();

@@ -156,12 +156,14 @@ pub async fn run(
         fixture_models: models.manifest.fixture,
         backend: format!("{:?}", models.backend).to_lowercase(),
         temporal: format!("{:?}", config.tick.temporal).to_lowercase(),
+        consensus: format!("{:?}", config.tick.consensus).to_lowercase(),
         members: engine.members(),
         last_decision: None,
         recent_decisions: Default::default(),
         duplicate_robot_id: Vec::new(),
         feed_stale: false,
         stale_peers: Vec::new(),
+        trust: Default::default(),
         metrics: engine.metrics.clone(),
     }));
     let mut http_task = None;
@@ -243,6 +245,7 @@ pub async fn run(
                 s.duplicate_robot_id = engine.duplicates.iter().copied().collect();
                 s.feed_stale = engine.feed_is_stale();
                 s.stale_peers = engine.stale_peers();
+                s.trust = engine.trust();
                 s.metrics = engine.metrics.clone();
             }
         }

@@ -18,12 +18,18 @@
 //!            peers' relayed ballots fill in votes lost on our own links
 //! a vote from every active member that said it votes, or decision_deadline passed
 //!       ─► consensus ─► Decision out (naming a digest of the ballots counted)
+//!       ─► trust: each voter judged against the others
 //! ```
 //!
 //! The decision is a deterministic function of the ballots held, so robots that hold
 //! the same ballots decide the same; relaying each robot's ballots partway through the
 //! tick is what makes them hold the same ballots when links lose messages. Comparing
 //! digests with peers' decisions shows, per robot, when it decided on fewer ballots.
+//!
+//! Each decision also teaches the robot whom to trust ([`crate::trust`]): every voter
+//! is judged against the decision the others reach without it. Our own trust goes out
+//! in our votes, so that under the trust rule every robot weighs a ballot alike; the
+//! trust we learn of a peer decides whether we fuse its embedding and worker estimate.
 //!
 //! A feed that repeats itself is set aside ([`crate::stale`]): our own frames showing
 //! the worker identically `stale_after` times in a row count as not seeing the worker
@@ -36,13 +42,15 @@
 //! members (liveliness) that have spoken at least once ("counted from the first vote"),
 //! so a peer that joins never stalls a tick, and one that leaves is not waited for.
 
-use crate::consensus::{self, Ballot, Weights};
+use crate::config::ConsensusRule;
+use crate::consensus::{self, Ballot, Rule, Weights};
 use crate::floor::{self, CameraCalibration, FloorView, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
 use crate::stale::Repeats;
 use crate::temporal::{self, Row, RowLayout, TemporalModel, Window};
+use crate::trust::{TrustBook, TrustConfig};
 use crate::vote;
 use spwi_proto::*;
 use std::collections::{BTreeMap, BTreeSet};
@@ -59,7 +67,12 @@ pub struct EngineConfig {
     pub embedding_wait: Duration,
     /// How long after a tick starts to decide with the votes at hand.
     pub decision_deadline: Duration,
-    pub weights: Weights,
+    /// How votes become the decision.
+    pub consensus: Rule,
+    /// How voters' trust is learned (the trust rule weighs votes by it; low-trust
+    /// peers leave the fusion of embeddings and worker estimates under either rule).
+    #[serde(default)]
+    pub trust: TrustConfig,
     /// Most ticks open at once; the oldest is dropped beyond.
     pub max_open_ticks: usize,
     /// The camera, for back-projecting detections onto the floor.
@@ -75,8 +88,8 @@ pub struct EngineConfig {
 }
 
 impl EngineConfig {
-    /// The rules a daemon runs with: timing from its `[tick]` config, consensus weights
-    /// from there or else from the model set's manifest. The daemon and the evaluation
+    /// The rules a daemon runs with: timing and consensus from its `[tick]` config, the
+    /// paper rule's weights from there or else from the model set's manifest. The daemon and the evaluation
     /// both build their engines here, so the evaluation judges what robots run.
     pub fn new(
         robot: RobotId,
@@ -91,9 +104,17 @@ impl EngineConfig {
             temporal: tick.temporal,
             embedding_wait: Duration::from_millis(tick.embedding_wait_ms),
             decision_deadline: Duration::from_millis(tick.decision_deadline_ms),
-            weights: Weights {
-                alpha: tick.alpha.unwrap_or(manifest.consensus.alpha),
-                beta: tick.beta.unwrap_or(manifest.consensus.beta),
+            consensus: match tick.consensus {
+                ConsensusRule::Paper => Rule::Paper(Weights {
+                    alpha: tick.alpha.unwrap_or(manifest.consensus.alpha),
+                    beta: tick.beta.unwrap_or(manifest.consensus.beta),
+                }),
+                ConsensusRule::Trust => Rule::Trust,
+            },
+            trust: TrustConfig {
+                window: tick.trust_window_ticks,
+                floor: tick.trust_floor,
+                fuse_above: tick.fuse_min_trust,
             },
             max_open_ticks: tick.max_open_ticks,
             camera: camera.clone(),
@@ -133,6 +154,8 @@ pub enum Output {
 struct Own {
     arrived: Duration,
     visibility: u32,
+    /// How well our frame shows the worker ([`vote::view_quality`]).
+    quality: f32,
     /// `None` when the worker was not seen (or the GCN failed). Both move into the
     /// window at the vote step.
     embedding: Option<Vec<f32>>,
@@ -214,6 +237,8 @@ pub struct Engine {
     own_feed: Repeats<(BBox, Vec<f32>)>,
     /// Each peer's feed: its embeddings.
     peer_feeds: BTreeMap<RobotId, Repeats<Vec<f32>>>,
+    /// Every voter's record of agreeing with the others, ours included.
+    trust: TrustBook,
     pub metrics: Metrics,
     /// Instance ids of other daemons seen using our robot id.
     pub duplicates: BTreeSet<u64>,
@@ -230,6 +255,7 @@ impl Engine {
         let row_layout = m.row;
         let temperature = inference.set().temperature(cfg.temporal);
         let floor = FloorView::new(cfg.camera.clone());
+        let trust = TrustBook::new(cfg.trust);
         Engine {
             cfg,
             inference,
@@ -245,6 +271,7 @@ impl Engine {
             decided: BTreeMap::new(),
             own_feed: Repeats::default(),
             peer_feeds: BTreeMap::new(),
+            trust,
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
             last_decision: None,
@@ -277,6 +304,11 @@ impl Engine {
     /// Peers whose feeds repeat themselves: left out until they change.
     pub fn stale_peers(&self) -> Vec<RobotId> {
         self.peer_feeds.iter().filter(|(_, f)| f.is_stale(self.cfg.stale_after)).map(|(r, _)| r.clone()).collect()
+    }
+
+    /// The trust this robot has learned of every voter judged so far, itself included.
+    pub fn trust(&self) -> BTreeMap<RobotId, f32> {
+        self.trust.all()
     }
 
     fn peer_is_stale(&self, robot: &RobotId) -> bool {
@@ -392,6 +424,7 @@ impl Engine {
         };
         let keypoints = f.human.as_ref().map(|h| temporal::normalise_keypoints(&h.keypoints, f.image_size));
         let visibility = f.visibility();
+        let quality = vote::view_quality(&f);
         let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
@@ -407,8 +440,16 @@ impl Engine {
             landmarks,
         }));
         let tick = self.open_tick(f.tick, now);
-        tick.own =
-            Some(Own { arrived: now, visibility, embedding, keypoints, worker, will_vote, vote_step_done: false });
+        tick.own = Some(Own {
+            arrived: now,
+            visibility,
+            quality,
+            embedding,
+            keypoints,
+            worker,
+            will_vote,
+            vote_step_done: false,
+        });
         self.advance(f.tick, now, out);
     }
 
@@ -557,14 +598,18 @@ impl Engine {
         let tick = self.open.get_mut(&t).expect("open");
         let own = tick.own.as_mut().expect("own frame");
         own.vote_step_done = true;
-        let peers_mean = temporal::mean(tick.embeddings.values().flatten().map(Vec::as_slice));
+        // Peers we have learned to doubt add nothing to what we fuse.
+        let trust = &self.trust;
+        let peers_mean =
+            temporal::mean(tick.embeddings.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, e)| e.as_deref()));
         let will_vote = own.will_vote;
         let relations = (self.row_layout == RowLayout::Relations).then(|| {
             let mut r = vec![0.0; RELATION_DIM];
             match self.cfg.temporal {
                 TemporalModel::Ego => floor::relations(own.worker.as_ref(), &self.floor.own_map.stations(), &mut r),
                 TemporalModel::Collective => {
-                    let team = floor::fuse(own.worker.iter().chain(tick.workers.values()));
+                    let peers = tick.workers.iter().filter(|(r, _)| trust.fuses(r)).map(|(_, w)| w);
+                    let team = floor::fuse(own.worker.iter().chain(peers));
                     floor::relations(team.as_ref(), &self.floor.team_map.stations(), &mut r)
                 }
             }
@@ -572,7 +617,7 @@ impl Engine {
         });
         // The row is the last use of our embedding and keypoints: move them, don't copy.
         let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations };
-        let visibility = own.visibility;
+        let (visibility, quality) = (own.visibility, own.quality);
         self.window.insert(t, row);
         if !will_vote {
             return None;
@@ -588,6 +633,8 @@ impl Engine {
                 tick: t,
                 steps: vote::vote(&l, self.temperature),
                 visibility,
+                trust: self.trust.of(&self.cfg.robot),
+                quality,
             }),
             Err(e) => {
                 self.metrics.model_errors += 1;
@@ -622,14 +669,11 @@ impl Engine {
         }
         let tick = self.open.remove(&t).expect("open");
         let t0 = Instant::now();
-        let mut ballots: Vec<Ballot<'_>> = tick
-            .votes
-            .values()
-            .map(|v| Ballot { robot: &v.robot, visibility: v.visibility, steps: &v.steps })
-            .collect();
-        let steps = consensus::decide(&mut ballots, self.cfg.weights);
+        let mut ballots: Vec<Ballot<'_>> = tick.votes.values().map(Ballot::from).collect();
+        let steps = consensus::decide(&mut ballots, self.cfg.consensus);
         let digest = consensus::digest(&ballots);
         let voters: Vec<RobotId> = ballots.iter().map(|b| b.robot.clone()).collect();
+        self.trust.learn(&ballots, self.cfg.consensus);
         self.metrics.observe(Stage::Consensus, t0.elapsed());
         if let Some(own) = &tick.own {
             self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(own.arrived));
@@ -691,7 +735,7 @@ impl Engine {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::model::{Backend, ModelSet};
     use std::sync::Arc;
@@ -712,7 +756,8 @@ mod tests {
             temporal: TemporalModel::Collective,
             embedding_wait: Duration::from_millis(30),
             decision_deadline: Duration::from_millis(60),
-            weights: Weights { alpha: 0.5, beta: 0.5 },
+            consensus: Rule::Trust,
+            trust: TrustConfig::default(),
             max_open_ticks: 8,
             camera: CameraCalibration::default(),
             relay_after: None,
@@ -903,9 +948,31 @@ mod tests {
     fn a_second_daemon_with_our_id_is_detected() {
         let set = models();
         let mut a = engine("a", &set);
-        a.handle(Input::Vote(VoteMsg { robot: id("a"), instance: 1, tick: 5, steps: vec![], visibility: 1 }), ms(0));
+        a.handle(
+            Input::Vote(VoteMsg {
+                robot: id("a"),
+                instance: 1,
+                tick: 5,
+                steps: vec![],
+                visibility: 1,
+                trust: 1.0,
+                quality: 1.0,
+            }),
+            ms(0),
+        );
         assert!(a.duplicates.is_empty(), "our own echo is not a clash");
-        a.handle(Input::Vote(VoteMsg { robot: id("a"), instance: 2, tick: 5, steps: vec![], visibility: 1 }), ms(0));
+        a.handle(
+            Input::Vote(VoteMsg {
+                robot: id("a"),
+                instance: 2,
+                tick: 5,
+                steps: vec![],
+                visibility: 1,
+                trust: 1.0,
+                quality: 1.0,
+            }),
+            ms(0),
+        );
         assert_eq!(a.duplicates.iter().copied().collect::<Vec<_>>(), vec![2]);
         assert_eq!(a.metrics.duplicate_id_messages, 1);
     }
@@ -925,6 +992,8 @@ mod tests {
                     tick: t,
                     steps: vec![StepVote { class: 0, confidence: 1.0 }],
                     visibility: 1,
+                    trust: 1.0,
+                    quality: 1.0,
                 }),
                 ms(2),
             );
@@ -1129,6 +1198,8 @@ mod tests {
                 tick: 1,
                 steps: vec![StepVote { class: 1, confidence: 0.5 }],
                 visibility: 1,
+                trust: 1.0,
+                quality: 1.0,
             }),
             ms(0),
         );
@@ -1181,6 +1252,8 @@ mod tests {
             tick,
             steps: vec![StepVote { class: 3, confidence: 1.0 }; 21],
             visibility: 9,
+            trust: 1.0,
+            quality: 1.0,
         };
         for t in 1..=7u64 {
             let now = ms(100 * t);
@@ -1204,6 +1277,106 @@ mod tests {
         let moving = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 8, true)), ms(0)));
         b.handle(Input::Embedding(moving), ms(800));
         assert!(b.stale_peers().is_empty(), "a's feed moves again");
+    }
+
+    fn peer_vote(robot: &str, tick: u64, class: u8) -> VoteMsg {
+        VoteMsg {
+            robot: id(robot),
+            instance: 2,
+            tick,
+            steps: vec![StepVote { class, confidence: 0.8 }; 3],
+            visibility: 1,
+            trust: 1.0,
+            quality: 1.0,
+        }
+    }
+
+    /// Robot a, which does not see the worker, hears b and c vote 1 and d vote 3 for
+    /// 150 ticks: a decides from their votes and learns whom to trust.
+    fn a_after_d_kept_disagreeing(set: &Arc<ModelSet>) -> Engine {
+        let mut a = engine("a", set);
+        for p in ["b", "c", "d"] {
+            a.handle(Input::MemberJoined(id(p)), ms(0));
+        }
+        for t in 1..=150u64 {
+            let now = ms(100 * t);
+            a.handle(Input::Frame(frame("a", t, false)), now);
+            for (p, class) in [("b", 1), ("c", 1), ("d", 3)] {
+                a.handle(Input::Vote(peer_vote(p, t, class)), now);
+            }
+            a.handle(Input::Poll, now + ms(99));
+        }
+        a
+    }
+
+    #[test]
+    fn a_peer_that_keeps_disagreeing_loses_our_trust_and_leaves_our_fusion() {
+        let set = models();
+        let a = a_after_d_kept_disagreeing(&set);
+        assert_eq!(a.metrics.decisions, 150);
+        let trust = a.trust();
+        // d, judged on ticks 2..=150 (on tick 1 nobody had been heard from yet):
+        // (1 − 1/100)^149 = 0.22; b and c always agreed with the others
+        assert!((trust[&id("d")] - 0.99f32.powi(149)).abs() < 1e-3, "{trust:?}");
+        assert_eq!((trust[&id("b")], trust[&id("c")]), (1.0, 1.0));
+        assert!(!trust.contains_key(&id("a")), "a never voted: never judged");
+
+        // Tick 151: a sees the worker and fuses its peers' embeddings into its row. What
+        // d sends changes nothing; what b sends does.
+        let vote_with = |b: f32, d: f32| {
+            let mut a = a_after_d_kept_disagreeing(&set);
+            let now = ms(15_100);
+            a.handle(Input::Frame(frame("a", 151, true)), now);
+            for (p, x) in [("b", b), ("c", 0.3), ("d", d)] {
+                let e = EmbeddingMsg {
+                    robot: id(p),
+                    instance: 2,
+                    tick: 151,
+                    embedding: Some(vec![x; EMBEDDING_DIM]),
+                    visibility: 3,
+                    votes: true,
+                    worker: None,
+                    landmarks: Vec::new(),
+                };
+                if let Some(v) = a.handle(Input::Embedding(e), now).iter().find_map(|o| match o {
+                    Output::Vote(v) => Some(v.clone()),
+                    _ => None,
+                }) {
+                    return v;
+                }
+            }
+            panic!("a votes once every embedding is in");
+        };
+        assert_eq!(vote_with(0.3, -0.9).steps, vote_with(0.3, 0.9).steps, "d is not fused");
+        assert_ne!(vote_with(-0.9, 0.3).steps, vote_with(0.9, 0.3).steps, "b is");
+    }
+
+    #[test]
+    fn our_vote_carries_the_trust_our_record_earned() {
+        let set = models();
+        let mut a = engine("a", &set);
+        a.handle(Input::MemberJoined(id("b")), ms(0));
+        let mut trusts = Vec::new();
+        for t in 1..=30u64 {
+            let now = ms(100 * t);
+            let mut out = a.handle(Input::Frame(frame("a", t, true)), now);
+            out.extend(a.handle(Input::Poll, now + ms(31))); // b sends no embedding
+            let ours = take_vote(&out);
+            trusts.push(ours.trust);
+            // b always votes another class than ours, as sure as we are
+            let theirs = VoteMsg { robot: id("b"), instance: 2, ..ours.clone() };
+            let theirs = VoteMsg {
+                steps: theirs.steps.iter().map(|s| StepVote { class: (s.class + 1) % 4, ..*s }).collect(),
+                ..theirs
+            };
+            a.handle(Input::Vote(theirs), now + ms(32));
+            a.handle(Input::Poll, now + ms(99));
+        }
+        // Tick 1 a decided alone (b not heard from yet): judged from tick 2 on.
+        assert_eq!(&trusts[..2], &[1.0, 1.0], "trusted until judged");
+        assert!(trusts[1..].windows(2).all(|w| w[1] < w[0]), "{trusts:?}");
+        assert!((trusts[29] - 0.99f32.powi(28)).abs() < 1e-4, "{}", trusts[29]);
+        assert!((a.trust()[&id("a")] - 0.99f32.powi(29)).abs() < 1e-4);
     }
 
     #[test]

@@ -10,13 +10,15 @@
 //!                       model/ (ego or collective GRU) ─► vote.rs ──publish──► peers
 //!                               ▼
 //!            consensus.rs over the votes of the live members ─► decision ──publish
-//!                 (ballots held are relayed partway through the tick)
+//!                 (ballots held are relayed partway through the tick;
+//!                  trust.rs learns from each decision whom to believe)
 //! ```
 //!
 //! Modules:
 //! - [`engine`]: one robot's tick state machine, pure (inputs and `now` in, messages out);
 //! - [`graph`], [`temporal`], [`vote`], [`consensus`]: the pure pipeline stages;
 //! - [`stale`]: feeds that repeat themselves (a frozen camera), set aside;
+//! - [`trust`]: each voter's record of agreeing with the others, which weighs its votes;
 //! - [`floor`]: back-projection, the shared worker track and station map, relations;
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
 //! - [`daemon`]: Zenoh wiring, membership (liveliness), the event loop;
@@ -40,5 +42,6 @@ pub mod router;
 pub mod stale;
 pub mod status;
 pub mod temporal;
+pub mod trust;
 pub mod vote;
 pub mod zenoh_config;

@@ -4,7 +4,7 @@
 use crate::metrics::Metrics;
 use serde::Serialize;
 use spwi_proto::{DecisionMsg, RobotId};
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::fmt::Write;
 use std::sync::{Arc, Mutex};
 
@@ -29,6 +29,8 @@ pub struct Status {
     pub fixture_models: bool,
     pub backend: String,
     pub temporal: String,
+    /// The consensus rule: "paper" or "trust".
+    pub consensus: String,
     /// Live members, this robot included.
     pub members: Vec<RobotId>,
     pub last_decision: Option<DecisionMsg>,
@@ -40,6 +42,9 @@ pub struct Status {
     pub feed_stale: bool,
     /// Peers whose feeds repeat themselves: left out of the tick until they change.
     pub stale_peers: Vec<RobotId>,
+    /// The trust this robot has learned of each voter judged so far, itself included
+    /// (`crate::trust`): the share of its recent votes that agreed with the others.
+    pub trust: BTreeMap<RobotId, f32>,
     pub metrics: Metrics,
 }
 
@@ -69,6 +74,13 @@ impl Status {
         );
         for p in &self.stale_peers {
             let _ = writeln!(o, "spwi_peer_feed_stale{{{l},peer=\"{p}\"}} 1");
+        }
+        let _ = writeln!(
+            o,
+            "# HELP spwi_trust share of a voter's recent votes that agreed with the others' decision, as this robot learned it\n# TYPE spwi_trust gauge"
+        );
+        for (p, t) in &self.trust {
+            let _ = writeln!(o, "spwi_trust{{{l},peer=\"{p}\"}} {t}");
         }
         o
     }

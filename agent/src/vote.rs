@@ -1,7 +1,27 @@
 //! GRU logits → this robot's vote (paper III-E): for t and each forecast step, the
-//! argmax class and its calibrated confidence softmax(z / T) of that class. Pure.
+//! argmax class and its calibrated confidence softmax(z / T) of that class; and how
+//! well the robot sees the worker, which the trust rule weighs the vote by. Pure.
 
-use spwi_proto::{StepVote, NUM_CLASSES};
+use spwi_proto::{DetectionFrame, StepVote, NUM_CLASSES};
+
+/// A worker this tall in the image (share of its height) is seen as well as it gets:
+/// keypoints carry a few pixels of noise, so a smaller figure gives a noisier pose.
+const FULL_VIEW_HEIGHT: f32 = 0.25;
+/// The least quality of a vote: one from the team's track alone, without a view.
+pub const TRACK_ONLY_QUALITY: f32 = 0.1;
+
+/// How well `frame` shows the worker, in [`TRACK_ONLY_QUALITY`], 1]: the worker's
+/// height in the image against [`FULL_VIEW_HEIGHT`], times the share of its keypoints
+/// inside the image (a figure cut by the image border shows less of its pose).
+pub fn view_quality(frame: &DetectionFrame) -> f32 {
+    let Some(h) = &frame.human else { return TRACK_ONLY_QUALITY };
+    let [w_img, h_img] = frame.image_size;
+    let size = (h.bbox.h / (FULL_VIEW_HEIGHT * h_img)).min(1.0);
+    let points = h.keypoints.chunks_exact(2);
+    let n = points.len().max(1) as f32;
+    let inside = points.filter(|p| (0.0..=w_img).contains(&p[0]) && (0.0..=h_img).contains(&p[1])).count() as f32 / n;
+    (size * inside).clamp(TRACK_ONLY_QUALITY, 1.0)
+}
 
 /// Softmax of `logits / temperature`, computed stably.
 pub fn softmax(logits: &[f32; NUM_CLASSES], temperature: f32) -> [f32; NUM_CLASSES] {
@@ -47,6 +67,30 @@ mod tests {
         // a higher temperature flattens the distribution
         let cold = vote(&[[0.0, 2.0, 0.0, 0.0]], 2.0)[0].confidence;
         assert!(cold < v[0].confidence);
+    }
+
+    #[test]
+    fn a_near_whole_worker_is_seen_best_and_a_vote_from_the_track_least() {
+        let mut f = crate::engine::tests::frame("r1", 1, true);
+        let h_img = f.image_size[1];
+        let human = f.human.as_mut().unwrap();
+        human.bbox.h = 0.5 * h_img;
+        let inside = human.keypoints.clone();
+        assert!(
+            inside.chunks(2).all(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[1] <= h_img),
+            "the test frame's pose is in view"
+        );
+        assert_eq!(view_quality(&f), 1.0);
+        f.human.as_mut().unwrap().bbox.h = 0.125 * h_img;
+        assert!((view_quality(&f) - 0.5).abs() < 1e-6, "half the full height");
+        let human = f.human.as_mut().unwrap();
+        human.bbox.h = 0.5 * h_img;
+        let half = human.keypoints.len() / 4 * 2; // the first half of the points, moved out of the image
+        human.keypoints[..half].chunks_mut(2).for_each(|p| p[0] = -10.0);
+        let share = (human.keypoints.len() / 2 - half / 2) as f32 / (human.keypoints.len() / 2) as f32;
+        assert!((view_quality(&f) - share).abs() < 1e-6, "{} vs {share}", view_quality(&f));
+        f.human = None;
+        assert_eq!(view_quality(&f), TRACK_ONLY_QUALITY);
     }
 
     #[test]

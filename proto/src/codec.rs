@@ -13,8 +13,9 @@ use serde::Serialize;
 
 /// Bumped on every incompatible change of any payload (2: robot pose in the detection
 /// frame, worker estimate and landmarks in the embedding message; 3: relayed ballots,
-/// the ballot digest in the decision).
-pub const PROTOCOL_VERSION: u16 = 3;
+/// the ballot digest in the decision; 4: the voter's standing and view quality in the
+/// vote).
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -141,6 +142,8 @@ mod tests {
             tick: 42,
             steps: vec![StepVote { class: 2, confidence: 0.75 }; 21],
             visibility: 5,
+            trust: 0.9,
+            quality: 0.5,
         }
     }
 
@@ -217,6 +220,10 @@ mod tests {
         v.steps[0].class = 4;
         let e = decode::<VoteMsg>(&encode(&v)).unwrap_err().to_string();
         assert!(e.contains("steps.class"), "{e}");
+        let e = decode::<VoteMsg>(&encode(&VoteMsg { trust: 1.5, ..vote() })).unwrap_err().to_string();
+        assert!(e.contains("trust") && e.contains("1.5 not in [0, 1]"), "{e}");
+        let e = decode::<VoteMsg>(&encode(&VoteMsg { quality: f32::NAN, ..vote() })).unwrap_err().to_string();
+        assert!(e.contains("quality"), "{e}");
     }
 
     #[test]

@@ -308,6 +308,13 @@ pub struct VoteMsg {
     pub tick: u64,
     pub steps: Vec<StepVote>,
     pub visibility: u32,
+    /// How often this robot's votes agreed with the decision of the others lately, as
+    /// the robot itself measured it from the ballots it decided on (in [0, 1]). It
+    /// travels with the vote so that every robot weighs the ballot alike.
+    pub trust: f32,
+    /// How well the robot sees the worker this tick (in [0, 1]): how large and how
+    /// complete the worker is in its view.
+    pub quality: f32,
 }
 
 impl Validate for VoteMsg {
@@ -319,6 +326,11 @@ impl Validate for VoteMsg {
             class("steps.class", s.class)?;
             if !(s.confidence.is_finite() && (0.0..=1.0).contains(&s.confidence)) {
                 return Err(invalid("steps.confidence", format!("{} not in [0, 1]", s.confidence)));
+            }
+        }
+        for (name, x) in [("trust", self.trust), ("quality", self.quality)] {
+            if !(x.is_finite() && (0.0..=1.0).contains(&x)) {
+                return Err(invalid(name, format!("{x} not in [0, 1]")));
             }
         }
         Ok(())

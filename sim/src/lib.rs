@@ -9,7 +9,7 @@
 //! npy.rs        a streaming .npy writer
 //! render.rs     `spwi-sim render`: a top-down PNG and each camera's detections
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
-//! stuck_camera.rs a camera frozen on one frame showing the worker (a fault to inject)
+//! faulty_camera.rs cameras that lie: frozen on one frame, or looping an old clip
 //! bench.rs      `spwi-sim bench`: N agent processes over Zenoh; latency, CPU, memory
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
@@ -24,10 +24,10 @@ pub mod dataset;
 pub mod demo;
 pub mod demo_web;
 pub mod eval;
+pub mod faulty_camera;
 pub mod layout;
 pub mod npy;
 pub mod render;
 pub mod service;
 pub mod stats;
-pub mod stuck_camera;
 pub mod world_args;

@@ -6,7 +6,7 @@
 //! of whichever robot holds slot S on its first frame showing the worker (a fault for
 //! end-to-end tests; robot ids in a container fleet are not known in advance, slots are).
 
-use crate::stuck_camera::StuckCamera;
+use crate::faulty_camera::StuckCamera;
 use crate::world_args::WorldArgs;
 use anyhow::{anyhow, Result};
 use spwi_agent::cli::{init_tracing, spawn_signal_handler};

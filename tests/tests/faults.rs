@@ -88,6 +88,8 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             tick: 1,
             steps: vec![StepVote { class: 1, confidence: 0.5 }],
             visibility: 1,
+            trust: 1.0,
+            quality: 1.0,
         };
         let mut wrong_version = encode(&good_vote);
         wrong_version[0] = 99;

@@ -48,6 +48,10 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         assert!(status["metrics"]["decisions"].as_u64().unwrap() > 0);
         assert_eq!(status["feed_stale"], false);
         assert_eq!(status["stale_peers"], serde_json::json!([]));
+        assert_eq!(status["consensus"], "trust");
+        let trust = status["trust"].as_object().expect("trust per voter");
+        assert!(!trust.is_empty() && trust.keys().all(|r| r == "h0" || r == "h1"), "{trust:?}");
+        assert!(trust.values().all(|t| (0.0..=1.0).contains(&t.as_f64().unwrap())), "{trust:?}");
 
         let (code, body) = tokio::task::spawn_blocking(move || get(addr, "/metrics")).await.unwrap();
         assert_eq!(code, 200);
@@ -58,6 +62,7 @@ async fn status_metrics_and_health_are_served_while_deciding() {
             "stage=\"frame_to_decision\"",
             "spwi_feed_stale{robot=\"h0\"} 0",
             "spwi_decided_on_fewer_ballots_total{robot=\"h0\"}",
+            "spwi_trust{robot=\"h0\",peer=\"h1\"}",
         ] {
             assert!(body.contains(needle), "/metrics lacks {needle}:\n{body}");
         }

@@ -40,6 +40,10 @@ pub struct EvalArgs {
     /// Robots (lowest slots) whose camera is stuck on a frame showing the worker.
     #[arg(long, default_value_t = 0)]
     pub faulty: usize,
+    /// Robots (the slots after the stuck ones) whose camera loops a 5 s clip of the
+    /// worker it recorded once.
+    #[arg(long, default_value_t = 0)]
+    pub looping: usize,
     /// Mean delay of a message between robots, ms (default: loopback-like, 0.5 ms).
     #[arg(long, default_value_t = 0.0)]
     pub delay: f64,
@@ -77,6 +81,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         dropouts,
         loss,
         faulty,
+        looping,
         delay,
         agent_config,
         json,
@@ -93,9 +98,9 @@ pub fn main(a: EvalArgs) -> Result<()> {
     if !(0.0..=10_000.0).contains(&delay) {
         anyhow::bail!("--delay {delay}: milliseconds, 0 to 10000");
     }
-    if dropouts >= robots || faulty > robots {
+    if dropouts >= robots || faulty + looping >= robots {
         anyhow::bail!(
-            "--dropouts {dropouts} / --faulty {faulty}: must leave at least one of the {robots} robots working"
+            "--dropouts {dropouts} / --faulty {faulty} + --looping {looping}: must leave at least one of the {robots} robots working"
         );
     }
     let tick = match &agent_config {
@@ -161,7 +166,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         episodes,
         seed,
         ticks,
-        faults: crate::eval::Faults { dropouts, loss, faulty, delay_ms: delay },
+        faults: crate::eval::Faults { dropouts, loss, faulty, looping, delay_ms: delay },
         tick,
     })?;
     crate::eval::print(&report);

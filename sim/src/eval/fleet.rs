@@ -9,7 +9,7 @@ use super::bus::{Bus, Net};
 use super::observers::{Observers, Predictions};
 use super::score::{confuse, Confusion, Tally};
 use super::EvalOptions;
-use crate::stuck_camera::StuckCamera;
+use crate::faulty_camera::{LoopingCamera, StuckCamera};
 use anyhow::Result;
 use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
 use spwi_agent::temporal::TemporalModel;
@@ -40,6 +40,8 @@ pub struct Tallies {
     pub close_pair: ClosePair,
     /// Per robot slot: gnn, ego, collective.
     pub per_robot: Vec<[Tally; 3]>,
+    /// Per robot slot: the sum of the trust its votes carried, and their number.
+    pub vote_trust: Vec<(f64, u64)>,
     pub confusion_ego: Confusion,
     pub confusion_collective: Confusion,
     /// Ticks on which some robot decided something, and how many of them every live
@@ -81,6 +83,13 @@ impl Tallies {
             for (x, y) in a.iter_mut().zip(b) {
                 x.merge(y);
             }
+        }
+        if self.vote_trust.len() < o.vote_trust.len() {
+            self.vote_trust.resize(o.vote_trust.len(), (0.0, 0));
+        }
+        for (a, b) in self.vote_trust.iter_mut().zip(&o.vote_trust) {
+            a.0 += b.0;
+            a.1 += b.1;
         }
         for (a, b) in
             [(&mut self.confusion_ego, &o.confusion_ego), (&mut self.confusion_collective, &o.confusion_collective)]
@@ -149,9 +158,11 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         .collect::<Result<Vec<_>>>()?;
     let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
     let mut stuck: Vec<StuckCamera> = (0..n).map(|_| StuckCamera::default()).collect();
+    let mut looping: Vec<LoopingCamera> = (0..n).map(|_| LoopingCamera::default()).collect();
     let mut intents = Vec::with_capacity(ticks + horizon);
     let mut records = Vec::with_capacity(ticks);
-    let mut tallies = Tallies { per_robot: vec![Default::default(); n], ..Default::default() };
+    let mut tallies =
+        Tallies { per_robot: vec![Default::default(); n], vote_trust: vec![(0.0, 0); n], ..Default::default() };
 
     // A fleet already running when the episode starts: one unscored tick in which every
     // robot hears from every other (a cold fleet's first tick is decided by each robot
@@ -183,6 +194,8 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             let mut frame = world.observe(slot, &ids[slot]);
             if slot < o.faults.faulty {
                 frame = stuck[slot].pass(frame);
+            } else if slot < o.faults.lying() {
+                frame = looping[slot].pass(frame);
             }
             obs.see(&frame);
             bus.deliver(slot, Input::Frame(frame), now);
@@ -193,12 +206,17 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let mut votes: Vec<Option<Vec<u8>>> = vec![None; n];
         let mut decided: Vec<Option<Vec<u8>>> = vec![None; n];
         let (mut messages, mut bytes) = (0, 0);
+        let vote_trust = &mut tallies.vote_trust;
         bus.run_until(now + TICK, |slot, _, out| {
             messages += 1;
             bytes += encoded_len(out);
             match out {
                 Output::Embedding(e) if e.tick == tick => embeddings[slot] = e.embedding.clone(),
-                Output::Vote(v) if v.tick == tick => votes[slot] = Some(v.steps.iter().map(|s| s.class).collect()),
+                Output::Vote(v) if v.tick == tick => {
+                    votes[slot] = Some(v.steps.iter().map(|s| s.class).collect());
+                    vote_trust[slot].0 += f64::from(v.trust);
+                    vote_trust[slot].1 += 1;
+                }
                 Output::Decision(d) if d.tick == tick => {
                     decided[slot] = Some(d.steps.iter().map(|s| s.class).collect())
                 }
@@ -246,7 +264,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(c) = &p.collective {
                 tallies.collective.add(c, truth);
-                if *slot >= o.faults.faulty {
+                if *slot >= o.faults.lying() {
                     tallies.healthy_collective.add(c, truth);
                 }
                 if close {

@@ -59,12 +59,20 @@ pub struct Faults {
     /// Robots (the lowest slots) whose camera is stuck on an old frame that shows the
     /// worker: confident, plausible, wrong.
     pub faulty: usize,
+    /// Robots (the slots after the stuck ones) whose camera loops an old clip of the
+    /// worker: every frame changes, none is true.
+    pub looping: usize,
 }
 
 impl Faults {
     /// A fleet where nothing goes wrong.
     pub fn none() -> Faults {
         Faults::default()
+    }
+
+    /// Robots whose camera lies (stuck or looping): the lowest slots.
+    pub fn lying(&self) -> usize {
+        self.faulty + self.looping
     }
 }
 
@@ -89,6 +97,8 @@ pub struct EvalOptions {
 #[derive(Debug, Clone, Serialize)]
 pub struct PerRobot {
     pub robot: String,
+    /// The mean trust its votes carried (its agreement with the others' decisions).
+    pub trust: Option<f64>,
     pub gnn: f64,
     pub ego: Accuracy,
     pub collective: Accuracy,
@@ -205,7 +215,9 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     let per_robot = (0..all.per_robot.len())
         .map(|slot| {
             let model = |k: usize| of(&|e| e.per_robot.get(slot).map_or(&EMPTY, |r| &r[k]));
-            PerRobot { robot: format!("r{slot}"), gnn: model(0).t, ego: model(1), collective: model(2) }
+            let (sum, votes) = all.vote_trust.get(slot).copied().unwrap_or_default();
+            let trust = (votes > 0).then(|| sum / votes as f64);
+            PerRobot { robot: format!("r{slot}"), trust, gnn: model(0).t, ego: model(1), collective: model(2) }
         })
         .collect();
     Ok(Report {
@@ -309,10 +321,11 @@ pub fn print(r: &Report) {
     );
     if r.faults != Faults::default() {
         println!(
-            "faults: {} dropping out half-way, {:.0}% messages lost, {} stuck cameras, {} ms delay",
+            "faults: {} dropping out half-way, {:.0}% messages lost, {} stuck and {} looping cameras, {} ms delay",
             r.faults.dropouts,
             100.0 * r.faults.loss,
             r.faults.faulty,
+            r.faults.looping,
             r.faults.delay_ms
         );
     }
@@ -335,8 +348,9 @@ pub fn print(r: &Report) {
     }
     for p in &r.per_robot {
         println!(
-            "  robot {:<4} gnn {} · ego {} / {} · collective {} / {}",
+            "  robot {:<4} trust {} · gnn {} · ego {} / {} · collective {} / {}",
             p.robot,
+            p.trust.map_or("–".into(), |t| format!("{t:.2}")),
             pct(p.gnn),
             pct(p.ego.t),
             pct(p.ego.future.unwrap_or(0.0)),
@@ -391,7 +405,7 @@ mod tests {
     #[test]
     fn the_same_seed_gives_the_same_figures() {
         let m = fixture();
-        let faults = Faults { loss: 0.2, dropouts: 1, faulty: 1, delay_ms: 5.0 };
+        let faults = Faults { loss: 0.2, dropouts: 1, faulty: 1, looping: 0, delay_ms: 5.0 };
         let a = run(&options(m.clone(), faults.clone())).unwrap();
         let b = run(&options(m, faults)).unwrap();
         assert_eq!(without_timings(&a), without_timings(&b));
@@ -463,7 +477,7 @@ mod tests {
 
     #[test]
     fn consensus_figures_match_a_hand_computed_case() {
-        use spwi_agent::consensus::{decide, Ballot, Weights};
+        use spwi_agent::consensus::{decide, Ballot, Rule, Weights};
         use spwi_proto::{RobotId, StepVote};
         // Robot a sees 3 detections and says 2 (confidence 0.9); b sees 1 and says 1 (0.6);
         // c sees 4 and says 1 (0.3). α = β = 0.5:
@@ -479,9 +493,9 @@ mod tests {
             .iter()
             .zip(&ids)
             .zip(&votes)
-            .map(|((&visibility, robot), steps)| Ballot { robot, visibility, steps })
+            .map(|((&visibility, robot), steps)| Ballot { robot, visibility, trust: 1.0, quality: 1.0, steps })
             .collect();
-        let d = decide(&mut ballots, Weights { alpha: 0.5, beta: 0.5 });
+        let d = decide(&mut ballots, Rule::Paper(Weights { alpha: 0.5, beta: 0.5 }));
         assert_eq!(d[0].class, 1);
         assert!((d[0].score - 0.5625).abs() < 1e-6);
         let mut t = score::Tally::default();

@@ -5,7 +5,7 @@ use super::{find_model_set, run, EvalOptions, Faults, Report};
 use crate::world_args::BUILT_IN;
 use anyhow::Result;
 use serde::Serialize;
-use spwi_agent::config::TickConfig;
+use spwi_agent::config::{ConsensusRule, TickConfig};
 use spwi_agent::model::{Backend, ModelSet};
 use spwi_world::generate::{self, LayoutSource, NamedLayout};
 use spwi_world::layout::{CameraPolicy, Layout};
@@ -76,9 +76,32 @@ pub fn unseen_floors(study: &str, camera: Option<CameraPolicy>) -> Result<Vec<(S
 }
 
 /// The `[tick]` settings of the paper's protocol: votes go out once, nobody relays
-/// them, and a feed that repeats itself is believed.
+/// them, a feed that repeats itself is believed, and the paper's rule weighs the votes.
 pub fn paper_protocol() -> TickConfig {
-    TickConfig { relay_ms: 0, stale_after_frames: 0, ..TickConfig::default() }
+    TickConfig { relay_ms: 0, stale_after_frames: 0, consensus: ConsensusRule::Paper, ..TickConfig::default() }
+}
+
+/// The mean trust the faulty robots' votes carried / the others'.
+fn trust_split(r: &Report) -> String {
+    let lying = r.faults.lying();
+    let mean = |ps: &[super::PerRobot]| {
+        let ts: Vec<f64> = ps.iter().filter_map(|p| p.trust).collect();
+        if ts.is_empty() {
+            "–".to_owned()
+        } else {
+            format!("{:.2}", ts.iter().sum::<f64>() / ts.len() as f64)
+        }
+    };
+    let split = lying.min(r.per_robot.len());
+    let faulty = if lying == 0 { "–".to_owned() } else { mean(&r.per_robot[..split]) };
+    format!("{faulty} / {}", mean(&r.per_robot[split..]))
+}
+
+fn rule_name(r: ConsensusRule) -> &'static str {
+    match r {
+        ConsensusRule::Paper => "paper",
+        ConsensusRule::Trust => "trust",
+    }
 }
 
 fn load(root: &Path, window: usize, horizon: usize, frames: Option<usize>) -> Result<std::sync::Arc<ModelSet>> {
@@ -145,10 +168,15 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         Faults { loss: 0.1, ..Faults::none() },
         Faults { loss: 0.3, ..Faults::none() },
         Faults { faulty: 1, ..Faults::none() },
+        Faults { looping: 1, ..Faults::none() },
     ] {
-        // The paper's protocol (no relays, no check for frozen feeds) beside ours.
+        // The paper's protocol (no relays, no check for frozen feeds, the paper's rule)
+        // beside ours with each consensus rule.
         st.faults.push(one_with(3, 4, &default, s.seed, faults.clone(), paper_protocol())?);
-        st.faults.push(one(3, 4, &default, s.seed, faults)?);
+        for consensus in [ConsensusRule::Paper, ConsensusRule::Trust] {
+            let ours = TickConfig { consensus, ..TickConfig::default() };
+            st.faults.push(one_with(3, 4, &default, s.seed, faults.clone(), ours)?);
+        }
     }
     if let Some(r) = st.scenarios.iter().find(|r| r.scenario == 3) {
         st.generalisation.push(r.clone());
@@ -358,12 +386,15 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
     let _ = writeln!(w, "\n## Beyond the paper: faults (scenario 3, 4 robots, 2 s → 2 s)\n");
     let _ = writeln!(
         w,
-        "Each fault twice: with the paper's protocol (each vote sent once, every feed believed) and with ours (`[tick]` defaults: the ballots each robot holds relayed {} ms into the tick, a camera repeating the same worker detection {} times set aside; `agent/src/engine.rs`). *Healthy collective*: the collective GRU of the robots whose camera works. Messages and bytes: what each robot publishes per tick.\n",
+        "Each fault three times: with the paper's protocol (each vote sent once, every feed believed, the paper's consensus rule) and with ours (`[tick]` defaults: the ballots each robot holds relayed {} ms into the tick, a camera repeating the same worker detection {} times set aside, peers trusted below {} left out of the fusion; `agent/src/engine.rs`) under each consensus rule: *paper* (normalised shares of visibility and confidence) and *trust* (each vote's log-likelihood ratio weighted by the voter's agreement with the others over the last {} decided ticks and by its view of the worker; `agent/src/consensus.rs`, `agent/src/trust.rs`). The daemon's default rule is `{}`. *Healthy collective*: the collective GRU of the robots whose camera works. Messages and bytes: what each robot publishes per tick.\n",
         TickConfig::default().relay_ms,
-        TickConfig::default().stale_after_frames
+        TickConfig::default().stale_after_frames,
+        TickConfig::default().fuse_min_trust,
+        TickConfig::default().trust_window_ticks,
+        rule_name(TickConfig::default().consensus),
     );
-    let _ = writeln!(w, "| fault | protocol | team, all ticks | healthy collective t | consensus t | consensus t+1…H | agreement | messages / bytes per robot tick |");
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(w, "| fault | protocol | team, all ticks | healthy collective t | consensus t | consensus t+1…H | agreement | trust: faulty robot / others | messages / bytes per robot tick |");
+    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|");
     for r in &st.faults {
         let f = &r.faults;
         let what = if f.dropouts > 0 {
@@ -372,17 +403,24 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             format!("{:.0}% of messages lost", 100.0 * f.loss)
         } else if f.faulty > 0 {
             format!("{} stuck camera (confident, wrong)", f.faulty)
+        } else if f.looping > 0 {
+            format!("{} camera looping an old 5 s clip", f.looping)
         } else {
             "none".into()
         };
-        let protocol = if r.tick == paper_protocol() { "paper" } else { "ours" };
+        let protocol = if r.tick == paper_protocol() {
+            "paper".to_owned()
+        } else {
+            format!("ours, {} rule", rule_name(r.tick.consensus))
+        };
         let (c, cf) = acc(r, "consensus");
         let _ = writeln!(
             w,
-            "| {what} | {protocol} | {} | {} | {c} | {cf} | {} | {:.2} / {:.0} |",
+            "| {what} | {protocol} | {} | {} | {c} | {cf} | {} | {} | {:.2} / {:.0} |",
             acc(r, "team_all_ticks").0,
             acc(r, "healthy_collective").0,
             pct(r.agreement),
+            trust_split(r),
             r.messages_per_robot_tick,
             r.bytes_per_robot_tick
         );

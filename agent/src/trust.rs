@@ -1,0 +1,155 @@
+//! Who has been right lately: each voter's trust, learned from the ballots this robot
+//! decided on.
+//!
+//! After each decision, every voter that was not alone is judged against the decision
+//! the *other* voters reach without it (same rule, same ballots less its own): the
+//! share of its steps that agree enters a moving average over about `window` decided
+//! ticks. Its trust is that average, never below `floor`, so a robot that was wrong for
+//! a while still counts a little and, being judged all the while, earns its trust back
+//! once its camera recovers. A robot starts trusted, and a record outlives a robot's
+//! leaving: one that comes back is still known.
+//!
+//! A robot puts its own trust into its vote ([`spwi_proto::VoteMsg::trust`]): every
+//! robot then weighs a ballot alike, which the team's agreement needs. The trust this
+//! robot learns of its peers decides whose embeddings and worker estimates it fuses;
+//! `/status` shows both.
+
+use crate::consensus::{self, Ballot, Rule};
+use spwi_proto::RobotId;
+use std::collections::BTreeMap;
+
+/// How trust is learned (from `[tick]`).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrustConfig {
+    /// Decided ticks over which agreement is averaged.
+    pub window: u32,
+    /// Least trust a voter keeps.
+    pub floor: f32,
+    /// Peers trusted less than this leave our embedding and worker-track fusion.
+    pub fuse_above: f32,
+}
+
+impl Default for TrustConfig {
+    fn default() -> Self {
+        TrustConfig { window: 100, floor: 0.1, fuse_above: 0.5 }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct TrustBook {
+    cfg: TrustConfig,
+    /// Moving average of agreement per voter (absent: never judged).
+    agreement: BTreeMap<RobotId, f32>,
+}
+
+impl TrustBook {
+    pub fn new(cfg: TrustConfig) -> Self {
+        TrustBook { cfg, agreement: BTreeMap::new() }
+    }
+
+    /// The trust of `robot`: 1 until it has been judged.
+    pub fn of(&self, robot: &RobotId) -> f32 {
+        self.agreement.get(robot).map_or(1.0, |a| a.max(self.cfg.floor))
+    }
+
+    /// A peer we fuse the embeddings and worker estimates of.
+    pub fn fuses(&self, robot: &RobotId) -> bool {
+        self.of(robot) >= self.cfg.fuse_above
+    }
+
+    /// Every voter judged so far and its trust.
+    pub fn all(&self) -> BTreeMap<RobotId, f32> {
+        self.agreement.keys().map(|r| (r.clone(), self.of(r))).collect()
+    }
+
+    /// Judges each voter of a decided tick against the others' decision under `rule`.
+    /// `ballots` sorted by robot, as [`consensus::decide`] leaves them.
+    pub fn learn(&mut self, ballots: &[Ballot<'_>], rule: Rule) {
+        if ballots.len() < 2 {
+            return;
+        }
+        let rate = 1.0 / self.cfg.window.max(1) as f32;
+        let mut others = Vec::with_capacity(ballots.len() - 1);
+        for (i, b) in ballots.iter().enumerate() {
+            others.clear();
+            others.extend(ballots.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, o)| *o));
+            let theirs = consensus::decide_sorted(&others, rule);
+            let judged = b.steps.len().min(theirs.len());
+            if judged == 0 {
+                continue;
+            }
+            let agreed = b.steps.iter().zip(&theirs).filter(|(s, t)| s.class == t.class).count();
+            let x = agreed as f32 / judged as f32;
+            let a = self.agreement.entry(b.robot.clone()).or_insert(1.0);
+            *a += rate * (x - *a);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use spwi_proto::StepVote;
+
+    fn id(s: &str) -> RobotId {
+        RobotId::new(s).unwrap()
+    }
+
+    /// `class_of[i]` is what robot i votes, every step at confidence .8.
+    fn tick(book: &mut TrustBook, ids: &[RobotId], class_of: &[u8]) {
+        let steps: Vec<Vec<StepVote>> =
+            class_of.iter().map(|&c| vec![StepVote { class: c, confidence: 0.8 }; 3]).collect();
+        let ballots: Vec<Ballot<'_>> = ids
+            .iter()
+            .zip(&steps)
+            .map(|(r, s)| Ballot { robot: r, visibility: 1, trust: book.of(r), quality: 1.0, steps: s })
+            .collect();
+        book.learn(&ballots, Rule::Trust);
+    }
+
+    #[test]
+    fn a_voter_that_keeps_disagreeing_loses_trust_down_to_the_floor_and_earns_it_back() {
+        let cfg = TrustConfig { window: 10, floor: 0.1, fuse_above: 0.5 };
+        let mut book = TrustBook::new(cfg);
+        let ids = [id("a"), id("b"), id("c")];
+        assert_eq!(book.of(&ids[2]), 1.0, "trusted until judged");
+        for _ in 0..5 {
+            tick(&mut book, &ids, &[1, 1, 3]);
+        }
+        let after5 = book.of(&ids[2]);
+        assert!((after5 - 0.9f32.powi(5)).abs() < 1e-5, "{after5}"); // (1 − 1/10)^5
+        assert!(book.fuses(&ids[2]), "0.59: still fused");
+        for _ in 0..60 {
+            tick(&mut book, &ids, &[1, 1, 3]);
+        }
+        assert_eq!(book.of(&ids[2]), 0.1, "floored");
+        assert!(!book.fuses(&ids[2]));
+        assert_eq!(book.of(&ids[0]), 1.0, "the two that agree keep their trust");
+        for _ in 0..30 {
+            tick(&mut book, &ids, &[1, 1, 1]);
+        }
+        assert!(book.of(&ids[2]) > 0.9, "recovered: {}", book.of(&ids[2]));
+        assert_eq!(book.all().len(), 3);
+    }
+
+    #[test]
+    fn a_lone_voter_is_not_judged_and_agreement_counts_step_by_step() {
+        let mut book = TrustBook::new(TrustConfig { window: 1, ..TrustConfig::default() });
+        let ids = [id("a"), id("b")];
+        tick(&mut book, &ids[..1], &[2]);
+        assert!(book.all().is_empty());
+        // two voters, each judged against the other: a says 2 at every step, b 2, 3, 3
+        let (sa, sb) = (vec![StepVote { class: 2, confidence: 0.8 }; 3], {
+            let mut s = vec![StepVote { class: 3, confidence: 0.8 }; 3];
+            s[0].class = 2;
+            s
+        });
+        let ballots = [
+            Ballot { robot: &ids[0], visibility: 1, trust: 1.0, quality: 1.0, steps: &sa },
+            Ballot { robot: &ids[1], visibility: 1, trust: 1.0, quality: 1.0, steps: &sb },
+        ];
+        book.learn(&ballots, Rule::Trust);
+        assert!((book.of(&ids[0]) - 1.0 / 3.0).abs() < 1e-6);
+        assert!((book.of(&ids[1]) - 1.0 / 3.0).abs() < 1e-6);
+    }
+}
