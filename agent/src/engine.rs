@@ -598,8 +598,21 @@ impl Engine {
         let tick = self.open.get_mut(&t).expect("open");
         let own = tick.own.as_mut().expect("own frame");
         own.vote_step_done = true;
-        // Peers we have learned to doubt add nothing to what we fuse.
+        // Where each robot puts the worker this tick, ours first: an estimate most of
+        // the others contradict is left out of the team's track and counts against its
+        // robot's trust; so do peers we have learned to doubt.
+        let me = &self.cfg.robot;
+        let estimates: Vec<(&RobotId, &WorkerEstimate)> =
+            own.worker.as_ref().map(|w| (me, w)).into_iter().chain(tick.workers.iter()).collect();
+        let agrees = floor::agrees_with_most(&estimates.iter().map(|(_, w)| *w).collect::<Vec<_>>());
         let trust = &self.trust;
+        let fused = |i: usize, r: &RobotId| agrees.as_ref().is_none_or(|a| a[i]) && (r == me || trust.fuses(r));
+        let team_worker =
+            floor::fuse(estimates.iter().enumerate().filter(|(i, (r, _))| fused(*i, r)).map(|(_, (_, w))| *w));
+        let judged: Vec<(RobotId, bool)> = match &agrees {
+            Some(a) => estimates.iter().zip(a).map(|((r, _), ok)| ((*r).clone(), *ok)).collect(),
+            None => Vec::new(),
+        };
         let peers_mean =
             temporal::mean(tick.embeddings.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, e)| e.as_deref()));
         let will_vote = own.will_vote;
@@ -608,9 +621,7 @@ impl Engine {
             match self.cfg.temporal {
                 TemporalModel::Ego => floor::relations(own.worker.as_ref(), &self.floor.own_map.stations(), &mut r),
                 TemporalModel::Collective => {
-                    let peers = tick.workers.iter().filter(|(r, _)| trust.fuses(r)).map(|(_, w)| w);
-                    let team = floor::fuse(own.worker.iter().chain(peers));
-                    floor::relations(team.as_ref(), &self.floor.team_map.stations(), &mut r)
+                    floor::relations(team_worker.as_ref(), &self.floor.team_map.stations(), &mut r)
                 }
             }
             r
@@ -619,6 +630,9 @@ impl Engine {
         let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations };
         let (visibility, quality) = (own.visibility, own.quality);
         self.window.insert(t, row);
+        for (robot, ok) in judged {
+            self.trust.learn_track(&robot, ok);
+        }
         if !will_vote {
             return None;
         }
@@ -1349,6 +1363,40 @@ pub(crate) mod tests {
         };
         assert_eq!(vote_with(0.3, -0.9).steps, vote_with(0.3, 0.9).steps, "d is not fused");
         assert_ne!(vote_with(-0.9, 0.3).steps, vote_with(0.9, 0.3).steps, "b is");
+    }
+
+    #[test]
+    fn a_peer_that_places_the_worker_where_nobody_else_does_loses_our_trust() {
+        let set = models();
+        let mut a = engine("a", &set);
+        for p in ["b", "c", "d"] {
+            a.handle(Input::MemberJoined(id(p)), ms(0));
+        }
+        let at = |x: f32| WorkerEstimate { position: [x, 2.0], velocity: [0.0; 2], covariance: [0.04, 0.0, 0.5] };
+        for t in 1..=100u64 {
+            let now = ms(100 * t);
+            a.handle(Input::Frame(frame("a", t, false)), now);
+            // b and c place the worker 0.3 m apart, d 4 m away; all three abstain
+            for (p, x) in [("b", 5.0), ("c", 5.3), ("d", 9.0)] {
+                let e = EmbeddingMsg {
+                    robot: id(p),
+                    instance: 2,
+                    tick: t,
+                    embedding: Some(vec![x * 0.01 + t as f32 * 1e-3; EMBEDDING_DIM]),
+                    visibility: 3,
+                    votes: false,
+                    worker: Some(at(x)),
+                    landmarks: Vec::new(),
+                };
+                a.handle(Input::Embedding(e), now);
+            }
+            a.handle(Input::Poll, now + ms(99));
+        }
+        let trust = a.trust();
+        // judged on ticks 2..=100 (on tick 1 nobody had been heard from yet)
+        assert!((trust[&id("d")] - 0.99f32.powi(99)).abs() < 1e-3, "{trust:?}");
+        assert_eq!((trust[&id("b")], trust[&id("c")]), (1.0, 1.0));
+        assert_eq!(a.metrics.decisions, 100, "nobody voted, every tick was still decided");
     }
 
     #[test]

@@ -1,10 +1,16 @@
-//! Who has been right lately: each voter's trust, learned from the ballots this robot
-//! decided on.
+//! Who has been right lately: each robot's trust, learned from what it shared.
 //!
-//! After each decision, every voter that was not alone is judged against the decision
-//! the *other* voters reach without it (same rule, same ballots less its own): the
-//! share of its steps that agree enters a moving average over about `window` decided
-//! ticks. Its trust is that average, never below `floor`, so a robot that was wrong for
+//! Two records per robot, each a moving average over about `window` judgements:
+//! - **votes**: after each decision, every voter that was not alone is judged against
+//!   the decision the *other* voters reach without it (same rule, same ballots less
+//!   its own): the share of its steps that agree;
+//! - **track**: each tick at least three robots place the worker on the floor, each
+//!   estimate is judged against the others (`floor::agrees_with_most`): 1 when it
+//!   puts the worker where most of them do, else 0. A camera replaying old frames
+//!   votes much like its peers — they all read the same team track — but places the
+//!   worker somewhere else.
+//!
+//! Trust is the product of the two, never below `floor`, so a robot that was wrong for
 //! a while still counts a little and, being judged all the while, earns its trust back
 //! once its camera recovers. A robot starts trusted, and a record outlives a robot's
 //! leaving: one that comes back is still known.
@@ -35,21 +41,34 @@ impl Default for TrustConfig {
     }
 }
 
+/// Moving averages of one robot's agreement with the others.
+#[derive(Debug, Clone, Copy)]
+struct Record {
+    votes: f32,
+    track: f32,
+}
+
+impl Default for Record {
+    fn default() -> Self {
+        Record { votes: 1.0, track: 1.0 }
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct TrustBook {
     cfg: TrustConfig,
-    /// Moving average of agreement per voter (absent: never judged).
-    agreement: BTreeMap<RobotId, f32>,
+    /// Per robot (absent: never judged).
+    records: BTreeMap<RobotId, Record>,
 }
 
 impl TrustBook {
     pub fn new(cfg: TrustConfig) -> Self {
-        TrustBook { cfg, agreement: BTreeMap::new() }
+        TrustBook { cfg, records: BTreeMap::new() }
     }
 
     /// The trust of `robot`: 1 until it has been judged.
     pub fn of(&self, robot: &RobotId) -> f32 {
-        self.agreement.get(robot).map_or(1.0, |a| a.max(self.cfg.floor))
+        self.records.get(robot).map_or(1.0, |r| (r.votes * r.track).max(self.cfg.floor))
     }
 
     /// A peer we fuse the embeddings and worker estimates of.
@@ -57,9 +76,21 @@ impl TrustBook {
         self.of(robot) >= self.cfg.fuse_above
     }
 
-    /// Every voter judged so far and its trust.
+    /// Every robot judged so far and its trust.
     pub fn all(&self) -> BTreeMap<RobotId, f32> {
-        self.agreement.keys().map(|r| (r.clone(), self.of(r))).collect()
+        self.records.keys().map(|r| (r.clone(), self.of(r))).collect()
+    }
+
+    fn rate(&self) -> f32 {
+        1.0 / self.cfg.window.max(1) as f32
+    }
+
+    /// Judges one robot's estimate of the worker for a tick: `agrees` when it put the
+    /// worker where most of the others did.
+    pub fn learn_track(&mut self, robot: &RobotId, agrees: bool) {
+        let rate = self.rate();
+        let r = self.records.entry(robot.clone()).or_default();
+        r.track += rate * (f32::from(u8::from(agrees)) - r.track);
     }
 
     /// Judges each voter of a decided tick against the others' decision under `rule`.
@@ -68,7 +99,7 @@ impl TrustBook {
         if ballots.len() < 2 {
             return;
         }
-        let rate = 1.0 / self.cfg.window.max(1) as f32;
+        let rate = self.rate();
         let mut others = Vec::with_capacity(ballots.len() - 1);
         for (i, b) in ballots.iter().enumerate() {
             others.clear();
@@ -80,8 +111,8 @@ impl TrustBook {
             }
             let agreed = b.steps.iter().zip(&theirs).filter(|(s, t)| s.class == t.class).count();
             let x = agreed as f32 / judged as f32;
-            let a = self.agreement.entry(b.robot.clone()).or_insert(1.0);
-            *a += rate * (x - *a);
+            let r = self.records.entry(b.robot.clone()).or_default();
+            r.votes += rate * (x - r.votes);
         }
     }
 }
@@ -151,5 +182,23 @@ mod tests {
         book.learn(&ballots, Rule::Trust);
         assert!((book.of(&ids[0]) - 1.0 / 3.0).abs() < 1e-6);
         assert!((book.of(&ids[1]) - 1.0 / 3.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn trust_is_the_product_of_the_vote_and_track_records() {
+        let mut book = TrustBook::new(TrustConfig { window: 2, floor: 0.1, fuse_above: 0.5 });
+        let ids = [id("a"), id("b"), id("c")];
+        book.learn_track(&ids[0], false); // 1 → 0.5
+        assert_eq!(book.of(&ids[0]), 0.5);
+        tick(&mut book, &ids, &[3, 1, 1]); // a's votes: 1 → 0.5
+        assert_eq!(book.of(&ids[0]), 0.25);
+        book.learn_track(&ids[0], true); // 0.5 → 0.75
+        assert_eq!(book.of(&ids[0]), 0.375);
+        book.learn_track(&ids[1], true);
+        assert_eq!(book.of(&ids[1]), 1.0);
+        for _ in 0..10 {
+            book.learn_track(&ids[2], false);
+        }
+        assert_eq!(book.of(&ids[2]), 0.1, "floored");
     }
 }

@@ -22,7 +22,7 @@ pub mod track;
 pub use calibration::CameraCalibration;
 pub use relations::{relations, RELATION_DIM};
 pub use stations::StationMap;
-pub use track::{fuse, Track};
+pub use track::{agrees_with_most, fuse, Track};
 
 use spwi_proto::{DetectionFrame, Landmark, WorkerEstimate};
 

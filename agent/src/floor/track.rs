@@ -18,6 +18,12 @@ pub const FRESH_TICKS: u64 = 10;
 const Q: f32 = 0.5;
 /// Velocity variance of a new track (m²/s²): walking speed is unknown at first.
 const INITIAL_VELOCITY_VAR: f32 = 1.0;
+/// What two robots' estimates of the same worker differ by beyond their filters'
+/// covariances (m² per axis): calibration, detection lag, the worker's width.
+const MODEL_VAR: f32 = 0.25;
+/// χ² with 2 degrees of freedom at 99.9 %: two estimates farther apart than this,
+/// in units of their combined variance, are not of the same place.
+const SAME_PLACE_GATE: f32 = 13.82;
 
 /// One axis: state (position, velocity) and its covariance.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -131,9 +137,43 @@ pub fn fuse<'a>(estimates: impl IntoIterator<Item = &'a WorkerEstimate>) -> Opti
     })
 }
 
+/// Whether two estimates put the worker at the same place, given their uncertainty.
+pub fn same_place(a: &WorkerEstimate, b: &WorkerEstimate) -> bool {
+    let d2 = (a.position[0] - b.position[0]).powi(2) + (a.position[1] - b.position[1]).powi(2);
+    d2 <= SAME_PLACE_GATE * (a.covariance[0] + b.covariance[0] + MODEL_VAR)
+}
+
+/// For each of the estimates held for one tick, whether it puts the worker where most
+/// of the others do ([`same_place`] with at least half of them); `None` with fewer
+/// than three, when no majority tells which of two is wrong.
+pub fn agrees_with_most(estimates: &[&WorkerEstimate]) -> Option<Vec<bool>> {
+    let n = estimates.len();
+    (n >= 3).then(|| {
+        (0..n)
+            .map(|i| {
+                let agree = (0..n).filter(|&j| j != i && same_place(estimates[i], estimates[j])).count();
+                2 * agree >= n - 1
+            })
+            .collect()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_estimate_most_others_disagree_with_is_the_odd_one_out() {
+        let at =
+            |x: f32, var: f32| WorkerEstimate { position: [x, 2.0], velocity: [0.0; 2], covariance: [var, 0.0, 1.0] };
+        let (a, b, c, far) = (at(5.0, 0.04), at(5.6, 0.04), at(4.7, 0.1), at(9.0, 0.04));
+        assert!(same_place(&a, &b), "0.6 m apart: within 3.7 σ of 0.33 m² combined");
+        assert!(!same_place(&a, &far), "4 m apart");
+        assert!(same_place(&at(9.0, 2.0), &a), "a wide estimate reaches far");
+        assert_eq!(agrees_with_most(&[&a, &far]), None, "two: no majority");
+        assert_eq!(agrees_with_most(&[&a, &b, &far]), Some(vec![true, true, false]));
+        assert_eq!(agrees_with_most(&[&far, &a, &c, &b]), Some(vec![false, true, true, true]));
+    }
 
     /// A deterministic standard normal from a counter (Box–Muller over a hash).
     fn noise(k: u64) -> f32 {
