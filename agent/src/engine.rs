@@ -26,10 +26,12 @@
 //! tick is what makes them hold the same ballots when links lose messages. Comparing
 //! digests with peers' decisions shows, per robot, when it decided on fewer ballots.
 //!
-//! Each decision also teaches the robot whom to trust ([`crate::trust`]): every voter
-//! is judged against the decision the others reach without it. Our own trust goes out
-//! in our votes, so that under the trust rule every robot weighs a ballot alike; the
-//! trust we learn of a peer decides whether we fuse its embedding and worker estimate.
+//! Each tick also teaches the robot whom to trust ([`crate::trust`]): every voter is
+//! judged against the decision the others reach without it, and every robot's estimate
+//! of the worker against the others' (one that most of them contradict also leaves
+//! this tick's team track at once). Our own trust goes out in our votes, so that under
+//! the trust rule every robot weighs a ballot alike; the trust we learn of a peer
+//! decides whether we fuse its embedding and worker estimate.
 //!
 //! A feed that repeats itself is set aside ([`crate::stale`]): our own frames showing
 //! the worker identically `stale_after` times in a row count as not seeing the worker
@@ -89,8 +91,9 @@ pub struct EngineConfig {
 
 impl EngineConfig {
     /// The rules a daemon runs with: timing and consensus from its `[tick]` config, the
-    /// paper rule's weights from there or else from the model set's manifest. The daemon and the evaluation
-    /// both build their engines here, so the evaluation judges what robots run.
+    /// paper rule's weights from there or else from the model set's manifest. The
+    /// daemon and the evaluation both build their engines here, so the evaluation
+    /// judges what robots run.
     pub fn new(
         robot: RobotId,
         instance: u64,
@@ -237,7 +240,7 @@ pub struct Engine {
     own_feed: Repeats<(BBox, Vec<f32>)>,
     /// Each peer's feed: its embeddings.
     peer_feeds: BTreeMap<RobotId, Repeats<Vec<f32>>>,
-    /// Every voter's record of agreeing with the others, ours included.
+    /// Every robot's record of agreeing with the others, ours included.
     trust: TrustBook,
     pub metrics: Metrics,
     /// Instance ids of other daemons seen using our robot id.
@@ -306,7 +309,7 @@ impl Engine {
         self.peer_feeds.iter().filter(|(_, f)| f.is_stale(self.cfg.stale_after)).map(|(r, _)| r.clone()).collect()
     }
 
-    /// The trust this robot has learned of every voter judged so far, itself included.
+    /// The trust this robot has learned of every robot judged so far, itself included.
     pub fn trust(&self) -> BTreeMap<RobotId, f32> {
         self.trust.all()
     }

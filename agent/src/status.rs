@@ -42,8 +42,9 @@ pub struct Status {
     pub feed_stale: bool,
     /// Peers whose feeds repeat themselves: left out of the tick until they change.
     pub stale_peers: Vec<RobotId>,
-    /// The trust this robot has learned of each voter judged so far, itself included
-    /// (`crate::trust`): the share of its recent votes that agreed with the others.
+    /// The trust this robot has learned of each robot judged so far, itself included
+    /// (`crate::trust`): how often its votes and its worker estimates agreed with the
+    /// others' lately.
     pub trust: BTreeMap<RobotId, f32>,
     pub metrics: Metrics,
 }
@@ -77,7 +78,7 @@ impl Status {
         }
         let _ = writeln!(
             o,
-            "# HELP spwi_trust share of a voter's recent votes that agreed with the others' decision, as this robot learned it\n# TYPE spwi_trust gauge"
+            "# HELP spwi_trust trust this robot learned of each robot: how often its votes and worker estimates agreed with the others'\n# TYPE spwi_trust gauge"
         );
         for (p, t) in &self.trust {
             let _ = writeln!(o, "spwi_trust{{{l},peer=\"{p}\"}} {t}");
