@@ -5,6 +5,8 @@ Starts deploy/compose.yaml (router, world, 4 agents) as its own compose project 
 checks, through each agent's /status (read from the host over the Docker network):
 
 1. all 4 agents are healthy, count 4 members and decide the same class tick by tick;
+   once the fleet has settled, over 30 s, the robots' own comparisons of their
+   decisions with their peers' agree at least 99.5 % of the time;
 2. `docker kill` one agent: the other 3 count 3 within 1.5 s and keep deciding;
 3. `--scale agent=6`: the newcomers (and the killed one, restarted) are counted and vote;
 4. `docker network disconnect` one agent: the others drop it within 1.5 s; after
@@ -41,6 +43,9 @@ COMPOSE = (["docker", "compose"] if _plugin else ["docker-compose"]) + [
 NETWORK = f"{PROJECT}_fleet"
 STUCK = os.path.join(ROOT, "tests", "compose-stuck.yaml")
 KILL_BUDGET_S = 1.5
+# Settled fleet, no fault: the share of peer decisions each robot found equal to its own.
+STEADY_S = 30.0
+STEADY_AGREEMENT = 0.995
 # Real packet loss: drop probability -> least agreement accepted (None: reported only).
 # TCP resends what is dropped, so a lost packet is a message late by a retransmission
 # timeout (>= 200 ms, past the 60 ms decision deadline), not a message lost; at 30 %
@@ -128,6 +133,20 @@ def agreement(ips, seconds=3.0):
         fail(f"only {len(common)} ticks decided by all {len(ips)} agents in the last 10 s")
     same = sum(1 for t in common if len({b[t] for b in by_tick}) == 1)
     return same / len(common), len(common)
+
+
+def steady_agreement(ips, seconds):
+    """Share of the peer decisions the agents compared with their own over `seconds`
+    (their `agreement_compared` / `agreement_same` counters) that were the same."""
+    def counters():
+        ms = [must_status(ip)["metrics"] for ip in ips]
+        return sum(m["agreement_compared"] for m in ms), sum(m["agreement_same"] for m in ms)
+    c0, s0 = counters()
+    time.sleep(seconds)
+    c1, s1 = counters()
+    if c1 - c0 < 100:
+        fail(f"only {c1 - c0} peer decisions compared in {seconds} s")
+    return (s1 - s0) / (c1 - c0), c1 - c0
 
 
 def keeps_deciding(ips, members):
@@ -230,6 +249,11 @@ def main():
     if share < 0.95:
         fail(f"agents agree on only {share:.1%} of ticks")
     figures["agreement_4"] = round(share, 4)
+    steady, compared = steady_agreement(ips, STEADY_S)
+    print(f"4 agents, settled: {steady:.2%} of {compared} peer decisions the same as their own over {STEADY_S:.0f} s")
+    figures["agreement_4_settled"] = round(steady, 4)
+    if steady < STEADY_AGREEMENT:
+        fail(f"a settled fleet agrees on only {steady:.2%} of compared decisions (< {STEADY_AGREEMENT:.1%})")
 
     # 2. kill one
     victim = next(iter(ag))
