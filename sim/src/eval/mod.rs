@@ -458,6 +458,21 @@ mod tests {
     }
 
     #[test]
+    fn a_camera_looping_an_old_clip_earns_less_trust_than_the_others() {
+        // 4 robots, 30 s episodes: robot 0 records 5 s after it first sees the worker,
+        // then replays them; its estimates of the worker disagree with the others'.
+        let o = EvalOptions {
+            robots: 4,
+            ticks: 300,
+            episodes: 2,
+            ..options(fixture(), Faults { looping: 1, ..Faults::none() })
+        };
+        let r = run(&o).unwrap();
+        let trust: Vec<f64> = r.per_robot.iter().map(|p| p.trust.expect("every robot voted")).collect();
+        assert!(trust[0] < 0.9 && trust[1..].iter().all(|&t| t > trust[0] + 0.05), "{trust:?}");
+    }
+
+    #[test]
     fn training_episodes_are_refused() {
         let mut m = fixture().manifest.clone();
         m.fixture = false;
