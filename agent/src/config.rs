@@ -64,6 +64,16 @@ pub enum ConsensusRule {
     Trust,
 }
 
+impl ConsensusRule {
+    /// The name the config file uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            ConsensusRule::Paper => "paper",
+            ConsensusRule::Trust => "trust",
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ModelsConfig {
@@ -275,6 +285,7 @@ mod tests {
         assert!(e.contains("tick.trust_floor = 1.5") && e.contains("0..=1"), "{e}");
         let c: AgentConfig = toml::from_str("[tick]\nconsensus = \"paper\"\n").unwrap();
         assert_eq!(c.tick.consensus, ConsensusRule::Paper);
+        assert_eq!(c.tick.consensus.name(), "paper", "the name the file uses");
         let e = toml::from_str::<AgentConfig>("[tick]\nconsensus = \"loudest\"\n").unwrap_err().to_string();
         assert!(e.contains("consensus") && e.contains("paper") && e.contains("trust"), "{e}");
         let c: AgentConfig = toml::from_str("[camera]\nheight_m = 0.02\n").unwrap();

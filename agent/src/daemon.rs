@@ -156,7 +156,7 @@ pub async fn run(
         fixture_models: models.manifest.fixture,
         backend: format!("{:?}", models.backend).to_lowercase(),
         temporal: format!("{:?}", config.tick.temporal).to_lowercase(),
-        consensus: format!("{:?}", config.tick.consensus).to_lowercase(),
+        consensus: config.tick.consensus.name().to_owned(),
         members: engine.members(),
         last_decision: None,
         recent_decisions: Default::default(),

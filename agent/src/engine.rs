@@ -605,19 +605,19 @@ impl Engine {
         // the others contradict is left out of the team's track and counts against its
         // robot's trust; so do peers we have learned to doubt.
         let me = &self.cfg.robot;
-        let estimates: Vec<(&RobotId, &WorkerEstimate)> =
-            own.worker.as_ref().map(|w| (me, w)).into_iter().chain(tick.workers.iter()).collect();
-        let agrees = floor::agrees_with_most(&estimates.iter().map(|(_, w)| *w).collect::<Vec<_>>());
+        let (robots, estimates): (Vec<&RobotId>, Vec<&WorkerEstimate>) =
+            own.worker.as_ref().map(|w| (me, w)).into_iter().chain(tick.workers.iter()).unzip();
+        let agrees = floor::agrees_with_most(&estimates);
         let trust = &self.trust;
-        let fused = |i: usize, r: &RobotId| agrees.as_ref().is_none_or(|a| a[i]) && (r == me || trust.fuses(r));
-        let team_worker =
-            floor::fuse(estimates.iter().enumerate().filter(|(i, (r, _))| fused(*i, r)).map(|(_, (_, w))| *w));
-        let judged: Vec<(RobotId, bool)> = match &agrees {
-            Some(a) => estimates.iter().zip(a).map(|((r, _), ok)| ((*r).clone(), *ok)).collect(),
-            None => Vec::new(),
-        };
+        let fused = |i: usize| agrees.as_ref().is_none_or(|a| a[i]) && (robots[i] == me || trust.fuses(robots[i]));
+        let team_worker = floor::fuse((0..estimates.len()).filter(|&i| fused(i)).map(|i| estimates[i]));
         let peers_mean =
             temporal::mean(tick.embeddings.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, e)| e.as_deref()));
+        // Judged after the fusion above, which used the trust earned before this tick;
+        // the trust our vote carries below includes this judgement.
+        for (robot, ok) in robots.iter().zip(agrees.iter().flatten()) {
+            self.trust.learn_track(robot, *ok);
+        }
         let will_vote = own.will_vote;
         let relations = (self.row_layout == RowLayout::Relations).then(|| {
             let mut r = vec![0.0; RELATION_DIM];
@@ -633,9 +633,6 @@ impl Engine {
         let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations };
         let (visibility, quality) = (own.visibility, own.quality);
         self.window.insert(t, row);
-        for (robot, ok) in judged {
-            self.trust.learn_track(&robot, ok);
-        }
         if !will_vote {
             return None;
         }
@@ -818,6 +815,25 @@ pub(crate) mod tests {
         out.iter().filter_map(|o| if let Output::Decision(d) = o { Some(d) } else { None }).collect()
     }
 
+    /// A vote as a trusted peer with a full view sends it.
+    fn vote_msg(robot: &str, instance: u64, tick: u64, steps: Vec<StepVote>) -> VoteMsg {
+        VoteMsg { robot: id(robot), instance, tick, steps, visibility: 1, trust: 1.0, quality: 1.0 }
+    }
+
+    /// A peer's embedding, worker estimate and whether it votes (no landmarks).
+    fn embedding_msg(robot: &str, tick: u64, x: f32, votes: bool, worker: Option<WorkerEstimate>) -> EmbeddingMsg {
+        EmbeddingMsg {
+            robot: id(robot),
+            instance: 2,
+            tick,
+            embedding: Some(vec![x; EMBEDDING_DIM]),
+            visibility: 3,
+            votes,
+            worker,
+            landmarks: Vec::new(),
+        }
+    }
+
     fn take_vote(out: &[Output]) -> VoteMsg {
         out.iter().find_map(|o| if let Output::Vote(v) = o { Some(v.clone()) } else { None }).expect("a vote")
     }
@@ -965,31 +981,9 @@ pub(crate) mod tests {
     fn a_second_daemon_with_our_id_is_detected() {
         let set = models();
         let mut a = engine("a", &set);
-        a.handle(
-            Input::Vote(VoteMsg {
-                robot: id("a"),
-                instance: 1,
-                tick: 5,
-                steps: vec![],
-                visibility: 1,
-                trust: 1.0,
-                quality: 1.0,
-            }),
-            ms(0),
-        );
+        a.handle(Input::Vote(vote_msg("a", 1, 5, vec![])), ms(0));
         assert!(a.duplicates.is_empty(), "our own echo is not a clash");
-        a.handle(
-            Input::Vote(VoteMsg {
-                robot: id("a"),
-                instance: 2,
-                tick: 5,
-                steps: vec![],
-                visibility: 1,
-                trust: 1.0,
-                quality: 1.0,
-            }),
-            ms(0),
-        );
+        a.handle(Input::Vote(vote_msg("a", 2, 5, vec![])), ms(0));
         assert_eq!(a.duplicates.iter().copied().collect::<Vec<_>>(), vec![2]);
         assert_eq!(a.metrics.duplicate_id_messages, 1);
     }
@@ -1002,18 +996,7 @@ pub(crate) mod tests {
         assert!(a.handle(Input::Frame(frame("a", 1, true)), ms(1)).is_empty());
         assert_eq!(a.metrics.stale_frames, 1);
         for t in 100..120 {
-            a.handle(
-                Input::Vote(VoteMsg {
-                    robot: id("z"),
-                    instance: 3,
-                    tick: t,
-                    steps: vec![StepVote { class: 0, confidence: 1.0 }],
-                    visibility: 1,
-                    trust: 1.0,
-                    quality: 1.0,
-                }),
-                ms(2),
-            );
+            a.handle(Input::Vote(vote_msg("z", 3, t, vec![StepVote { class: 0, confidence: 1.0 }])), ms(2));
         }
         assert_eq!(a.open.len(), 8);
         assert_eq!(a.metrics.evicted_ticks, 12);
@@ -1208,18 +1191,7 @@ pub(crate) mod tests {
         let set = models();
         let mut a = relaying("a", &set, Some(ms(40)));
         a.handle(Input::MemberJoined(id("b")), ms(0));
-        a.handle(
-            Input::Vote(VoteMsg {
-                robot: id("b"),
-                instance: 2,
-                tick: 1,
-                steps: vec![StepVote { class: 1, confidence: 0.5 }],
-                visibility: 1,
-                trust: 1.0,
-                quality: 1.0,
-            }),
-            ms(0),
-        );
+        a.handle(Input::Vote(vote_msg("b", 2, 1, vec![StepVote { class: 1, confidence: 0.5 }])), ms(0));
         a.handle(Input::Poll, ms(99)); // tick 1, opened by b's vote, is decided
                                        // b is an active member; a's own frame shows the worker at tick 2, b stays silent.
         let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
@@ -1264,13 +1236,8 @@ pub(crate) mod tests {
         b.handle(Input::MemberJoined(id("a")), ms(0));
         let frozen = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 1, true)), ms(0)));
         let vote_of_a = |tick| VoteMsg {
-            robot: id("a"),
-            instance: 1,
-            tick,
-            steps: vec![StepVote { class: 3, confidence: 1.0 }; 21],
             visibility: 9,
-            trust: 1.0,
-            quality: 1.0,
+            ..vote_msg("a", 1, tick, vec![StepVote { class: 3, confidence: 1.0 }; 21])
         };
         for t in 1..=7u64 {
             let now = ms(100 * t);
@@ -1296,18 +1263,6 @@ pub(crate) mod tests {
         assert!(b.stale_peers().is_empty(), "a's feed moves again");
     }
 
-    fn peer_vote(robot: &str, tick: u64, class: u8) -> VoteMsg {
-        VoteMsg {
-            robot: id(robot),
-            instance: 2,
-            tick,
-            steps: vec![StepVote { class, confidence: 0.8 }; 3],
-            visibility: 1,
-            trust: 1.0,
-            quality: 1.0,
-        }
-    }
-
     /// Robot a, which does not see the worker, hears b and c vote 1 and d vote 3 for
     /// 150 ticks: a decides from their votes and learns whom to trust.
     fn a_after_d_kept_disagreeing(set: &Arc<ModelSet>) -> Engine {
@@ -1319,7 +1274,7 @@ pub(crate) mod tests {
             let now = ms(100 * t);
             a.handle(Input::Frame(frame("a", t, false)), now);
             for (p, class) in [("b", 1), ("c", 1), ("d", 3)] {
-                a.handle(Input::Vote(peer_vote(p, t, class)), now);
+                a.handle(Input::Vote(vote_msg(p, 2, t, vec![StepVote { class, confidence: 0.8 }; 3])), now);
             }
             a.handle(Input::Poll, now + ms(99));
         }
@@ -1343,26 +1298,11 @@ pub(crate) mod tests {
         let vote_with = |b: f32, d: f32| {
             let mut a = a_after_d_kept_disagreeing(&set);
             let now = ms(15_100);
-            a.handle(Input::Frame(frame("a", 151, true)), now);
+            let mut out = a.handle(Input::Frame(frame("a", 151, true)), now);
             for (p, x) in [("b", b), ("c", 0.3), ("d", d)] {
-                let e = EmbeddingMsg {
-                    robot: id(p),
-                    instance: 2,
-                    tick: 151,
-                    embedding: Some(vec![x; EMBEDDING_DIM]),
-                    visibility: 3,
-                    votes: true,
-                    worker: None,
-                    landmarks: Vec::new(),
-                };
-                if let Some(v) = a.handle(Input::Embedding(e), now).iter().find_map(|o| match o {
-                    Output::Vote(v) => Some(v.clone()),
-                    _ => None,
-                }) {
-                    return v;
-                }
+                out.extend(a.handle(Input::Embedding(embedding_msg(p, 151, x, true, None)), now));
             }
-            panic!("a votes once every embedding is in");
+            take_vote(&out) // a votes once every embedding is in
         };
         assert_eq!(vote_with(0.3, -0.9).steps, vote_with(0.3, 0.9).steps, "d is not fused");
         assert_ne!(vote_with(-0.9, 0.3).steps, vote_with(0.9, 0.3).steps, "b is");
@@ -1381,16 +1321,8 @@ pub(crate) mod tests {
             a.handle(Input::Frame(frame("a", t, false)), now);
             // b and c place the worker 0.3 m apart, d 4 m away; all three abstain
             for (p, x) in [("b", 5.0), ("c", 5.3), ("d", 9.0)] {
-                let e = EmbeddingMsg {
-                    robot: id(p),
-                    instance: 2,
-                    tick: t,
-                    embedding: Some(vec![x * 0.01 + t as f32 * 1e-3; EMBEDDING_DIM]),
-                    visibility: 3,
-                    votes: false,
-                    worker: Some(at(x)),
-                    landmarks: Vec::new(),
-                };
+                // the embedding moves every tick: no peer's feed looks frozen
+                let e = embedding_msg(p, t, x * 0.01 + t as f32 * 1e-3, false, Some(at(x)));
                 a.handle(Input::Embedding(e), now);
             }
             a.handle(Input::Poll, now + ms(99));
@@ -1415,11 +1347,8 @@ pub(crate) mod tests {
             let ours = take_vote(&out);
             trusts.push(ours.trust);
             // b always votes another class than ours, as sure as we are
-            let theirs = VoteMsg { robot: id("b"), instance: 2, ..ours.clone() };
-            let theirs = VoteMsg {
-                steps: theirs.steps.iter().map(|s| StepVote { class: (s.class + 1) % 4, ..*s }).collect(),
-                ..theirs
-            };
+            let theirs =
+                vote_msg("b", 2, t, ours.steps.iter().map(|s| StepVote { class: (s.class + 1) % 4, ..*s }).collect());
             a.handle(Input::Vote(theirs), now + ms(32));
             a.handle(Input::Poll, now + ms(99));
         }

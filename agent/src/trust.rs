@@ -85,11 +85,19 @@ impl TrustBook {
         1.0 / self.cfg.window.max(1) as f32
     }
 
+    /// The record of `robot`, started on first use (no id copied once it exists).
+    fn record(&mut self, robot: &RobotId) -> &mut Record {
+        if !self.records.contains_key(robot) {
+            self.records.insert(robot.clone(), Record::default());
+        }
+        self.records.get_mut(robot).expect("just inserted")
+    }
+
     /// Judges one robot's estimate of the worker for a tick: `agrees` when it put the
     /// worker where most of the others did.
     pub fn learn_track(&mut self, robot: &RobotId, agrees: bool) {
         let rate = self.rate();
-        let r = self.records.entry(robot.clone()).or_default();
+        let r = self.record(robot);
         r.track += rate * (f32::from(u8::from(agrees)) - r.track);
     }
 
@@ -111,7 +119,7 @@ impl TrustBook {
             }
             let agreed = b.steps.iter().zip(&theirs).filter(|(s, t)| s.class == t.class).count();
             let x = agreed as f32 / judged as f32;
-            let r = self.records.entry(b.robot.clone()).or_default();
+            let r = self.record(b.robot);
             r.votes += rate * (x - r.votes);
         }
     }

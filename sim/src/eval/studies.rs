@@ -97,13 +97,6 @@ fn trust_split(r: &Report) -> String {
     format!("{faulty} / {}", mean(&r.per_robot[split..]))
 }
 
-fn rule_name(r: ConsensusRule) -> &'static str {
-    match r {
-        ConsensusRule::Paper => "paper",
-        ConsensusRule::Trust => "trust",
-    }
-}
-
 fn load(root: &Path, window: usize, horizon: usize, frames: Option<usize>) -> Result<std::sync::Arc<ModelSet>> {
     ModelSet::load(&find_model_set(root, window, horizon, frames)?, Backend::Tract, None)
 }
@@ -391,7 +384,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         TickConfig::default().stale_after_frames,
         TickConfig::default().fuse_min_trust,
         TickConfig::default().trust_window_ticks,
-        rule_name(TickConfig::default().consensus),
+        TickConfig::default().consensus.name(),
     );
     let _ = writeln!(w, "| fault | protocol | team, all ticks | healthy collective t | consensus t | consensus t+1…H | agreement | trust: faulty robot / others | messages / bytes per robot tick |");
     let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|");
@@ -411,7 +404,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         let protocol = if r.tick == paper_protocol() {
             "paper".to_owned()
         } else {
-            format!("ours, {} rule", rule_name(r.tick.consensus))
+            format!("ours, {} rule", r.tick.consensus.name())
         };
         let (c, cf) = acc(r, "consensus");
         let _ = writeln!(
