@@ -158,6 +158,7 @@ fn bench_codec() {
         visibility: 13,
         trust: 0.9,
         quality: 0.8,
+        signature: Vec::new(),
     };
     let d = DecisionMsg {
         robot: f.robot.clone(),

@@ -14,8 +14,10 @@ use tokio::sync::watch;
 /// One robot's spwi daemon: shares what it sees and agrees with its peers on where
 /// the worker is going.
 #[derive(Debug, Parser)]
-#[command(name = "spwi-agent", version)]
+#[command(name = "spwi-agent", version, subcommand_negates_reqs = true, args_conflicts_with_subcommands = true)]
 pub struct Args {
+    #[command(subcommand)]
+    pub command: Option<Command>,
     /// This robot's id ([A-Za-z0-9_-]{1,64}); unique within the fleet.
     #[arg(long, env = "SPWI_ROBOT_ID", required_unless_present_any = ["replay", "robot_id_from_hostname", "probe"])]
     pub robot_id: Option<RobotId>,
@@ -23,9 +25,16 @@ pub struct Args {
     /// replica); refused if the name is not a valid id.
     #[arg(long, env = "SPWI_ROBOT_ID_FROM_HOSTNAME", conflicts_with = "robot_id")]
     pub robot_id_from_hostname: bool,
-    /// The fleet (team) to join.
-    #[arg(long, env = "SPWI_FLEET", default_value = "default")]
-    pub fleet: FleetId,
+    /// The fleet (team) to join: `default` unless given, or the one of --fleet-dir.
+    #[arg(long, env = "SPWI_FLEET")]
+    pub fleet: Option<FleetId>,
+    /// The fleet directory (`spwi-agent fleet init`): join with mutual TLS and the
+    /// roster's access rules. Without it the fleet is open to anyone on the network.
+    #[arg(long, env = "SPWI_FLEET_DIR")]
+    pub fleet_dir: Option<PathBuf>,
+    /// Whose certificate to present from --fleet-dir (default: the robot id).
+    #[arg(long, env = "SPWI_IDENTITY", requires = "fleet_dir")]
+    pub identity: Option<String>,
     /// Agent settings (TOML); defaults apply to anything not set.
     #[arg(long, env = "SPWI_CONFIG")]
     pub config: Option<PathBuf>,
@@ -54,6 +63,14 @@ pub struct Args {
     /// every other option is ignored.
     #[arg(long, value_name = "ADDR")]
     pub probe: Option<std::net::SocketAddr>,
+}
+
+/// Commands other than running the daemon.
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Manage a fleet's certificates and roster (who may join).
+    #[command(subcommand)]
+    Fleet(crate::fleet::cli::FleetCommand),
 }
 
 /// This host's name, as the kernel has it.
@@ -150,7 +167,10 @@ async fn run(args: Args) -> Result<()> {
         }
         None => anyhow::bail!("--robot-id is required"),
     };
-    let zenoh = crate::zenoh_config::build(args.zenoh_config.as_deref(), &args.cfg)?;
+    let mut zenoh = crate::zenoh_config::build(args.zenoh_config.as_deref(), &args.cfg)?;
+    let identity = args.identity.unwrap_or_else(|| robot.to_string());
+    let credentials = crate::fleet::secure_or_warn(&mut zenoh, args.fleet_dir.as_deref(), &identity, "spwi-agent")?;
+    let fleet = fleet_of(args.fleet, credentials.as_deref())?;
     let models = tokio::task::spawn_blocking({
         let config = config.clone();
         move || daemon::load_models(&config)
@@ -159,7 +179,20 @@ async fn run(args: Args) -> Result<()> {
     .context("model loading panicked")??;
     let (tx, rx) = watch::channel(false);
     spawn_signal_handler(tx);
-    daemon::run(Options { robot, fleet: args.fleet, config, zenoh, record: args.record }, models, rx, None).await
+    daemon::run(Options { robot, fleet, config, zenoh, record: args.record, credentials }, models, rx, None).await
+}
+
+/// The fleet to join: the fleet directory's, which `--fleet` may repeat but not
+/// contradict; `default` for an open fleet without `--fleet`.
+pub fn fleet_of(given: Option<FleetId>, credentials: Option<&crate::fleet::Credentials>) -> Result<FleetId> {
+    match (given, credentials) {
+        (Some(f), Some(c)) if f != c.roster.fleet => {
+            anyhow::bail!("--fleet {f}, but the fleet directory is for fleet {}", c.roster.fleet)
+        }
+        (_, Some(c)) => Ok(c.roster.fleet.clone()),
+        (Some(f), None) => Ok(f),
+        (None, None) => Ok(FleetId::new("default").expect("a valid id")),
+    }
 }
 
 fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {
@@ -190,7 +223,17 @@ fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {
 
 /// `main` of `spwi-agent`.
 pub fn main() -> ExitCode {
-    let args = Args::parse();
+    let mut args = Args::parse();
+    if let Some(Command::Fleet(cmd)) = args.command.take() {
+        init_tracing(LogFormat::Human);
+        return match crate::fleet::cli::run(cmd) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("spwi-agent fleet: error: {e:#}");
+                ExitCode::FAILURE
+            }
+        };
+    }
     if let Some(addr) = args.probe {
         return if probe(addr) { ExitCode::SUCCESS } else { ExitCode::FAILURE };
     }

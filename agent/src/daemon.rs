@@ -33,6 +33,9 @@ pub struct Options {
     pub zenoh: zenoh::Config,
     /// Record every input and output of the engine to this MCAP file.
     pub record: Option<std::path::PathBuf>,
+    /// The fleet's credentials when it is secured (`--fleet-dir`); `zenoh` already
+    /// carries their TLS and access rules.
+    pub credentials: Option<Arc<crate::fleet::Credentials>>,
 }
 
 /// A message as the Zenoh callbacks hand it to the loop.
@@ -73,7 +76,7 @@ pub async fn run(
     mut shutdown: watch::Receiver<bool>,
     ready: Option<tokio::sync::oneshot::Sender<Started>>,
 ) -> Result<()> {
-    let Options { robot, fleet, config, zenoh, record } = opts;
+    let Options { robot, fleet, config, zenoh, record, credentials } = opts;
     config.validate()?;
     let instance = random_instance();
     let m = &models.manifest;
@@ -178,11 +181,12 @@ pub async fn run(
         let _ = ready.send(Started { status: status.clone(), http: http_addr });
     }
 
+    let mut signed_votes = credentials.map(|c| crate::fleet::signed_votes::SignedVotes::new(c, robot.clone()));
     let start = Instant::now();
     let mut bad_log = RateLimitedLog::new(Duration::from_secs(5));
     loop {
         let deadline = engine.next_deadline().map(|d| tokio::time::Instant::from_std(start + d));
-        let input = tokio::select! {
+        let mut input = tokio::select! {
             _ = shutdown.changed() => break,
             Some(Membership { robot: r, alive }) = member_rx.recv() => {
                 tracing::info!(robot = %r, alive, "membership change");
@@ -201,6 +205,13 @@ pub async fn run(
             },
             _ = sleep_until(deadline) => Input::Poll,
         };
+        if let Some(s) = signed_votes.as_mut() {
+            let forged = s.check(&mut input);
+            if forged > 0 {
+                *engine.metrics.bad_messages.entry("forged_relayed_vote").or_default() += forged as u64;
+                bad_log.warn(|| format!("dropped {forged} relayed vote(s) without their origin's signature"));
+            }
+        }
         let membership_change = matches!(input, Input::MemberJoined(_) | Input::MemberLeft(_));
         let now = start.elapsed();
         if let Some(r) = recorder.as_mut() {
@@ -217,7 +228,10 @@ pub async fn run(
             }
         }
         let mut decided = Vec::new();
-        for o in outputs {
+        for mut o in outputs {
+            if let Some(s) = &signed_votes {
+                s.sign(&mut o);
+            }
             let out = match &o {
                 Output::Embedding(m) => (Topic::Embedding, encode(m)),
                 Output::Vote(m) => (Topic::Vote, encode(m)),

@@ -649,6 +649,7 @@ impl Engine {
                 visibility,
                 trust: self.trust.of(&self.cfg.robot),
                 quality,
+                signature: Vec::new(), // the daemon signs what it publishes
             }),
             Err(e) => {
                 self.metrics.model_errors += 1;
@@ -817,7 +818,7 @@ pub(crate) mod tests {
 
     /// A vote as a trusted peer with a full view sends it.
     fn vote_msg(robot: &str, instance: u64, tick: u64, steps: Vec<StepVote>) -> VoteMsg {
-        VoteMsg { robot: id(robot), instance, tick, steps, visibility: 1, trust: 1.0, quality: 1.0 }
+        VoteMsg { robot: id(robot), instance, tick, steps, visibility: 1, trust: 1.0, quality: 1.0, signature: vec![] }
     }
 
     /// A peer's embedding, worker estimate and whether it votes (no landmarks).

@@ -23,6 +23,7 @@
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
 //! - [`daemon`]: Zenoh wiring, membership (liveliness), the event loop;
 //! - [`config`], [`zenoh_config`], [`cli`]: settings and the command line;
+//! - [`fleet`]: who may join: certificates, roster, mutual TLS and access control;
 //! - [`router`]: `spwi-router`, the meeting point for hosts without multicast;
 //! - [`http`], [`status`], [`metrics`]: `/healthz`, `/status`, `/metrics`.
 
@@ -31,6 +32,7 @@ pub mod config;
 pub mod consensus;
 pub mod daemon;
 pub mod engine;
+pub mod fleet;
 pub mod floor;
 pub mod graph;
 pub mod http;

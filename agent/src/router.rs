@@ -28,13 +28,21 @@ pub struct Args {
     /// Zenoh setting override KEY:VALUE (VALUE in json5), repeatable.
     #[arg(long = "cfg", value_name = "KEY:VALUE")]
     pub cfg: Vec<String>,
+    /// The fleet directory: accept only the fleet's members (mutual TLS, the roster's
+    /// access rules on everything it forwards). A `tcp/` --listen becomes `tls/`.
+    #[arg(long, env = "SPWI_FLEET_DIR")]
+    pub fleet_dir: Option<PathBuf>,
+    /// Whose certificate to present from --fleet-dir (a member of role router).
+    #[arg(long, env = "SPWI_IDENTITY", default_value = "router", requires = "fleet_dir")]
+    pub identity: String,
 }
 
 async fn run(args: Args) -> Result<()> {
     let mut overrides =
         vec![r#"mode:"router""#.to_owned(), format!("listen/endpoints:{}", serde_json::to_string(&[&args.listen])?)];
     overrides.extend(args.cfg);
-    let config = crate::zenoh_config::build(args.zenoh_config.as_deref(), &overrides)?;
+    let mut config = crate::zenoh_config::build(args.zenoh_config.as_deref(), &overrides)?;
+    crate::fleet::secure_or_warn(&mut config, args.fleet_dir.as_deref(), &args.identity, "spwi-router")?;
     let session = zenoh::open(config).await.map_err(|e| anyhow!("cannot start the Zenoh router: {e}"))?;
     tracing::info!(listen = %args.listen, zid = %session.zid(), "router up");
     let (tx, mut rx) = watch::channel(false);

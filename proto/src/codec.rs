@@ -15,7 +15,7 @@ use serde::Serialize;
 /// frame, worker estimate and landmarks in the embedding message; 3: relayed ballots,
 /// the ballot digest in the decision; 4: the voter's standing and view quality in the
 /// vote).
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -144,6 +144,7 @@ mod tests {
             visibility: 5,
             trust: 0.9,
             quality: 0.5,
+            signature: Vec::new(),
         }
     }
 
@@ -224,6 +225,8 @@ mod tests {
         assert!(e.contains("trust") && e.contains("1.5 not in [0, 1]"), "{e}");
         let e = decode::<VoteMsg>(&encode(&VoteMsg { quality: f32::NAN, ..vote() })).unwrap_err().to_string();
         assert!(e.contains("quality"), "{e}");
+        let e = decode::<VoteMsg>(&encode(&VoteMsg { signature: vec![1; 10], ..vote() })).unwrap_err().to_string();
+        assert!(e.contains("signature") && e.contains("10 bytes"), "{e}");
     }
 
     #[test]

@@ -315,6 +315,17 @@ pub struct VoteMsg {
     /// How well the robot sees the worker this tick (in [0, 1]): how large and how
     /// complete the worker is in its view.
     pub quality: f32,
+    /// In a secured fleet, the voter's Ed25519 signature over [`VoteMsg::signed_bytes`]
+    /// (64 bytes), so that a peer relaying the vote cannot change it; empty in an open
+    /// fleet. Not part of what is decided, nor of the decision digest.
+    pub signature: Vec<u8>,
+}
+
+impl VoteMsg {
+    /// What the signature covers: the vote encoded with an empty signature.
+    pub fn signed_bytes(&self) -> Vec<u8> {
+        crate::encode(&VoteMsg { signature: Vec::new(), ..self.clone() })
+    }
 }
 
 impl Validate for VoteMsg {
@@ -332,6 +343,9 @@ impl Validate for VoteMsg {
             if !(x.is_finite() && (0.0..=1.0).contains(&x)) {
                 return Err(invalid(name, format!("{x} not in [0, 1]")));
             }
+        }
+        if !matches!(self.signature.len(), 0 | 64) {
+            return Err(invalid("signature", format!("{} bytes, expected 0 or 64", self.signature.len())));
         }
         Ok(())
     }

@@ -73,7 +73,7 @@ proptest! {
     #[test]
     fn votes_round_trip(robot in robot(), instance in any::<u64>(), tick in any::<u64>(), steps in steps(), visibility in any::<u32>(),
                         trust in 0.0f32..=1.0, quality in 0.0f32..=1.0) {
-        let m = VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, trust, quality };
+        let m = VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, trust, quality, signature: vec![9; 64] };
         prop_assert_eq!(decode_from::<VoteMsg>(&encode(&m), &robot).unwrap(), m);
     }
 
@@ -87,7 +87,7 @@ proptest! {
     #[test]
     fn relayed_ballots_round_trip(robot in robot(), tick in any::<u64>(), votes in prop::collection::vec((steps(), any::<u32>()), 0..6)) {
         let votes = votes.into_iter().enumerate().map(|(i, (steps, visibility))| VoteMsg {
-            robot: RobotId::new(format!("o{i}")).unwrap(), instance: i as u64, tick, steps, visibility, trust: 1.0, quality: 0.5,
+            robot: RobotId::new(format!("o{i}")).unwrap(), instance: i as u64, tick, steps, visibility, trust: 1.0, quality: 0.5, signature: Vec::new(),
         }).collect();
         let m = BallotsMsg { robot: robot.clone(), instance: 2, tick, votes };
         prop_assert_eq!(decode_from::<BallotsMsg>(&encode(&m), &robot).unwrap(), m);

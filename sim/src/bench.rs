@@ -6,12 +6,16 @@
 //!
 //! Paced mode ticks at 10 Hz, as deployed. `--free` publishes the next tick as soon as
 //! every robot decided the last (or after 200 ms), giving the fleet's maximum rate.
+//! `--secured` runs the fleet as deployed outside development: a fresh fleet directory
+//! (CA, the world, one identity per agent), mutual TLS and access control on every link.
 
 use crate::demo::percentile;
 use anyhow::{anyhow, bail, Context, Result};
 use serde::Serialize;
 use spwi_agent::cli::init_tracing;
 use spwi_agent::config::LogFormat;
+use spwi_agent::fleet::authority::{self, Validity};
+use spwi_agent::fleet::{secure, Credentials, FleetDir, Role};
 use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
@@ -30,6 +34,7 @@ pub struct BenchOptions {
     pub scenario: Scenario,
     pub agent: PathBuf,
     pub models: Option<PathBuf>,
+    pub secured: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -44,6 +49,8 @@ pub struct LatencyMs {
 pub struct BenchReport {
     pub robots: usize,
     pub free_running: bool,
+    /// Mutual TLS and access control on every link (`--secured`).
+    pub secured: bool,
     pub ticks: u64,
     pub ticks_per_second: f64,
     /// Frame published → the last live robot's decision published, per tick.
@@ -99,6 +106,30 @@ fn proc_usage(pid: u32) -> Option<(f64, f64)> {
     Some((ticks / 100.0, rss_kb / 1024.0)) // USER_HZ is 100 on Linux
 }
 
+/// A throw-away fleet directory for a secured bench: the world and every agent.
+struct SecuredBench {
+    dir: FleetDir,
+}
+
+impl SecuredBench {
+    fn make(fleet: &FleetId, robots: &[RobotId]) -> Result<SecuredBench> {
+        let dir = FleetDir::new(std::env::temp_dir().join(format!("spwi-bench-fleet-{}", std::process::id())));
+        let _ = std::fs::remove_dir_all(&dir.root);
+        authority::init(&dir, fleet, Validity::days(1))?;
+        authority::add(&dir, &RobotId::new("world")?, Role::World, Validity::days(1))?;
+        for r in robots {
+            authority::add(&dir, r, Role::Robot, Validity::days(1))?;
+        }
+        Ok(SecuredBench { dir })
+    }
+}
+
+impl Drop for SecuredBench {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir.root);
+    }
+}
+
 struct Agents(Vec<Child>);
 
 impl Drop for Agents {
@@ -115,8 +146,14 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         bail!("{}: no spwi-agent binary there (cargo build --release builds it; or pass --agent)", o.agent.display());
     }
     let fleet = FleetId::new(format!("bench{}", std::process::id()))?;
+    let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
+    let secured = if o.secured { Some(SecuredBench::make(&fleet, &ids)?) } else { None };
     // The world's session is the hub the agents connect to; gossip completes the mesh.
-    let session = zenoh::open(zenoh_config::loopback_peer(&[])?).await.map_err(|e| anyhow!("zenoh: {e}"))?;
+    let mut hub_config = zenoh_config::loopback_peer(&[])?;
+    if let Some(s) = &secured {
+        secure::apply(&mut hub_config, &Credentials::load(&s.dir, "world")?)?;
+    }
+    let session = zenoh::open(hub_config).await.map_err(|e| anyhow!("zenoh: {e}"))?;
     let hub = session
         .info()
         .locators()
@@ -169,7 +206,6 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
             .map_err(|e| anyhow!(e))?
     };
 
-    let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
     let mut agents = Agents(Vec::new());
     for id in &ids {
         let mut cmd = Command::new(&o.agent);
@@ -182,6 +218,9 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
             .stderr(Stdio::null());
         if let Some(m) = &o.models {
             cmd.args(["--models", &m.display().to_string()]);
+        }
+        if let Some(s) = &secured {
+            cmd.arg("--fleet-dir").arg(&s.dir.root);
         }
         agents.0.push(cmd.spawn().with_context(|| format!("starting {}", o.agent.display()))?);
     }
@@ -263,6 +302,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     Ok(BenchReport {
         robots: o.robots,
         free_running: o.free_running,
+        secured: o.secured,
         ticks,
         ticks_per_second: ticks as f64 / elapsed,
         latency_ms: LatencyMs {
@@ -281,9 +321,10 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
 
 pub fn print(r: &BenchReport) {
     println!(
-        "{} robots{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
+        "{} robots{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
         r.robots,
         if r.free_running { " (free-running)" } else { " at 10 Hz" },
+        if r.secured { ", secured" } else { "" },
         r.ticks,
         r.ticks_per_second,
         r.latency_ms.p50,
@@ -319,18 +360,28 @@ pub struct BenchArgs {
     pub models: Option<PathBuf>,
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Run the fleet secured (mutual TLS, access control), with a throw-away CA.
+    #[arg(long)]
+    pub secured: bool,
 }
 
 /// `spwi-sim bench`: parses nothing more, runs the tool.
 pub fn main(a: BenchArgs) -> Result<()> {
-    let BenchArgs { robots, duration, free, scenario, agent, models, json } = a;
+    let BenchArgs { robots, duration, free, scenario, agent, models, json, secured } = a;
     init_tracing(LogFormat::Human);
     let agent = match agent {
         Some(a) => a,
         None => std::env::current_exe()?.with_file_name("spwi-agent"),
     };
-    let opts =
-        crate::bench::BenchOptions { robots: robots as usize, duration, free_running: free, scenario, agent, models };
+    let opts = crate::bench::BenchOptions {
+        robots: robots as usize,
+        duration,
+        free_running: free,
+        scenario,
+        agent,
+        models,
+        secured,
+    };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let report = rt.block_on(crate::bench::run(&opts))?;
     crate::bench::print(&report);

@@ -347,6 +347,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
             config: opts.agent.clone(),
             zenoh: peer()?,
             record: None,
+            credentials: None,
         };
         Ok((robot, tx, tokio::spawn(daemon::run(options, models.clone(), rx, None))))
     };

@@ -126,8 +126,15 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
 /// The arguments of `spwi-sim world`.
 #[derive(clap::Args, Debug)]
 pub struct WorldServiceArgs {
-    #[arg(long, default_value = "default")]
-    pub fleet: FleetId,
+    /// The fleet: `default` unless given, or the one of --fleet-dir.
+    #[arg(long, env = "SPWI_FLEET")]
+    pub fleet: Option<FleetId>,
+    /// The fleet directory: join with mutual TLS and the roster's access rules.
+    #[arg(long, env = "SPWI_FLEET_DIR")]
+    pub fleet_dir: Option<PathBuf>,
+    /// Whose certificate to present from --fleet-dir (a member of role world).
+    #[arg(long, env = "SPWI_IDENTITY", default_value = "world", requires = "fleet_dir")]
+    pub identity: String,
     #[command(flatten)]
     pub world: WorldArgs,
     #[arg(long, default_value_t = 1)]
@@ -149,8 +156,11 @@ pub struct WorldServiceArgs {
 
 /// `spwi-sim world`: parses nothing more, runs the tool.
 pub fn main(a: WorldServiceArgs) -> Result<()> {
-    let WorldServiceArgs { fleet, world, seed, zenoh_config, cfg, tick_ms, stuck_slot } = a;
+    let WorldServiceArgs { fleet, fleet_dir, identity, world, seed, zenoh_config, cfg, tick_ms, stuck_slot } = a;
     init_tracing(LogFormat::Human);
+    let mut zenoh = spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?;
+    let credentials = spwi_agent::fleet::secure_or_warn(&mut zenoh, fleet_dir.as_deref(), &identity, "spwi-sim world")?;
+    let fleet = spwi_agent::cli::fleet_of(fleet, credentials.as_deref())?;
     let floor = world.floor()?;
     if let Some(s) = stuck_slot {
         if s >= floor.layout.robots.len() {
@@ -163,7 +173,7 @@ pub fn main(a: WorldServiceArgs) -> Result<()> {
         scenario: world.scenario,
         seed,
         layout: floor.layout,
-        zenoh: spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?,
+        zenoh,
         tick: Duration::from_millis(tick_ms),
         stuck_slot,
     };

@@ -6,6 +6,7 @@
 use anyhow::{anyhow, Context, Result};
 use spwi_agent::config::AgentConfig;
 use spwi_agent::daemon::{self, Options, Started};
+use spwi_agent::fleet::{Credentials, FleetDir};
 use spwi_agent::model::{Backend, ModelSet};
 use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
@@ -53,19 +54,54 @@ pub struct Hub {
     pub session: zenoh::Session,
     pub locator: String,
     pub fleet: FleetId,
+    /// The fleet directory when the fleet is secured (the hub is then its `world`).
+    pub fleet_dir: Option<PathBuf>,
 }
 
 impl Hub {
     pub async fn start(fleet: &str) -> Result<Hub> {
         let session = zenoh::open(zenoh_config::loopback_peer(&[])?).await.map_err(|e| anyhow!(e))?;
         let locator = session.info().locators().await.into_iter().next().context("hub listens nowhere")?.to_string();
-        Ok(Hub { session, locator, fleet: FleetId::new(fleet)? })
+        Ok(Hub { session, locator, fleet: FleetId::new(fleet)?, fleet_dir: None })
+    }
+
+    /// A hub for the secured fleet in `dir`, presenting the certificate of `identity`
+    /// (a member of role world: it publishes the detections).
+    pub async fn start_secured(dir: &std::path::Path, identity: &str) -> Result<Hub> {
+        let (config, creds) = secured_peer(dir, identity, &[])?;
+        let session = zenoh::open(config).await.map_err(|e| anyhow!(e))?;
+        let locator = session.info().locators().await.into_iter().next().context("hub listens nowhere")?.to_string();
+        Ok(Hub { session, locator, fleet: creds.roster.fleet.clone(), fleet_dir: Some(dir.to_owned()) })
     }
 
     /// A Zenoh config for an agent: loopback peer connected to the hub.
     pub fn peer_config(&self) -> zenoh::Config {
         zenoh_config::loopback_peer(std::slice::from_ref(&self.locator)).unwrap()
     }
+
+    /// The config and credentials for a process presenting `identity`: open when the
+    /// hub is, else secured from the hub's fleet directory.
+    pub fn member_config(&self, identity: &str) -> Result<(zenoh::Config, Option<Arc<Credentials>>)> {
+        match &self.fleet_dir {
+            None => Ok((self.peer_config(), None)),
+            Some(dir) => {
+                let (c, creds) = secured_peer(dir, identity, std::slice::from_ref(&self.locator))?;
+                Ok((c, Some(creds)))
+            }
+        }
+    }
+}
+
+/// A loopback peer connected to `connect`, secured as `identity` of the fleet in `dir`.
+pub fn secured_peer(
+    dir: &std::path::Path,
+    identity: &str,
+    connect: &[String],
+) -> Result<(zenoh::Config, Arc<Credentials>)> {
+    let creds = Credentials::load(&FleetDir::new(dir), identity)?;
+    let mut c = zenoh_config::loopback_peer(connect)?;
+    spwi_agent::fleet::secure::apply(&mut c, &creds)?;
+    Ok((c, Arc::new(creds)))
 }
 
 /// A frame for `robot` at `tick`: the worker is seen unless `tick % 11 == robot_index`.
@@ -245,9 +281,17 @@ impl InProcessAgent {
         config: AgentConfig,
         record: Option<PathBuf>,
     ) -> InProcessAgent {
+        let (zenoh, credentials) = hub.member_config(robot.as_str()).expect("agent credentials");
+        let opts = Options { robot: robot.clone(), fleet: hub.fleet.clone(), config, zenoh, record, credentials };
+        Self::start_with(opts, models).await
+    }
+
+    /// Starts an agent with options of the test's own making (another identity's
+    /// certificate, a stale roster).
+    pub async fn start_with(opts: Options, models: &Arc<ModelSet>) -> InProcessAgent {
+        let robot = opts.robot.clone();
         let (tx, rx) = watch::channel(false);
         let (ready_tx, ready_rx) = tokio::sync::oneshot::channel();
-        let opts = Options { robot: robot.clone(), fleet: hub.fleet.clone(), config, zenoh: hub.peer_config(), record };
         let task = tokio::spawn(daemon::run(opts, models.clone(), rx, Some(ready_tx)));
         let started = within!(10, format!("agent {robot} to start"), ready_rx).expect("agent failed to start");
         InProcessAgent { robot: robot.clone(), started, shutdown: tx, task }

@@ -90,6 +90,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             visibility: 1,
             trust: 1.0,
             quality: 1.0,
+            signature: Vec::new(),
         };
         let mut wrong_version = encode(&good_vote);
         wrong_version[0] = 99;

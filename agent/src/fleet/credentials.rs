@@ -1,0 +1,205 @@
+//! What a running process holds of the fleet directory: the roster, and its own
+//! identity's certificate and key, every one checked before any connection is made.
+//!
+//! The checks are the ones TLS would make later, only with an error that names the
+//! file: a member the roster does not admit, a certificate of another name, another CA,
+//! out of its validity, or not matching the roster's key, a key that is not the
+//! certificate's. An expired certificate is refused here with its date; a peer's
+//! expired certificate is refused by the TLS handshake.
+
+use super::roster::{Member, Roster};
+use super::FleetDir;
+use anyhow::{anyhow, bail, Context, Result};
+use ring::signature::{Ed25519KeyPair, KeyPair as _, UnparsedPublicKey, ED25519};
+use spwi_proto::RobotId;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use x509_parser::pem::Pem;
+
+/// A member's credentials, checked.
+pub struct Credentials {
+    pub roster: Roster,
+    pub identity: Member,
+    pub ca_cert: PathBuf,
+    pub cert: PathBuf,
+    pub key: PathBuf,
+    signer: Ed25519KeyPair,
+    /// Public keys of the admitted members, by name.
+    keys: HashMap<RobotId, [u8; 32]>,
+}
+
+impl std::fmt::Debug for Credentials {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // never the key
+        f.debug_struct("Credentials").field("identity", &self.identity.name).field("cert", &self.cert).finish()
+    }
+}
+
+impl Credentials {
+    /// Loads and checks `identity`'s credentials from `dir`.
+    pub fn load(dir: &FleetDir, identity: &str) -> Result<Credentials> {
+        let roster = Roster::load(&dir.roster())?;
+        let Some(member) = roster.get(identity).cloned() else {
+            bail!("{identity} is not a member of the fleet in {}", dir.roster().display());
+        };
+        if member.revoked {
+            bail!("{identity} is revoked in {}", dir.roster().display());
+        }
+        let (ca_cert, cert, key) = (dir.ca_cert(), dir.member_cert(identity), dir.member_key(identity));
+        let ca_pem = read_pem(&ca_cert)?;
+        let ca = parse(&ca_pem, &ca_cert)?;
+        if !ca.is_ca() {
+            bail!("{} is not a CA certificate", ca_cert.display());
+        }
+        let pem = read_pem(&cert)?;
+        let x509 = parse(&pem, &cert)?;
+        let cn = x509.subject().iter_common_name().next().and_then(|c| c.as_str().ok()).unwrap_or("");
+        if cn != identity {
+            bail!("{}: the certificate is for {cn:?}, not {identity:?}", cert.display());
+        }
+        x509.verify_signature(Some(ca.public_key()))
+            .map_err(|_| anyhow!("{}: not signed by the fleet's CA {}", cert.display(), ca_cert.display()))?;
+        let validity = x509.validity();
+        let now = x509_parser::time::ASN1Time::now();
+        if validity.not_after < now {
+            bail!("{}: the certificate of {identity} expired on {}", cert.display(), validity.not_after);
+        }
+        if validity.not_before > now {
+            bail!("{}: the certificate of {identity} is not valid before {}", cert.display(), validity.not_before);
+        }
+        let public = x509.public_key().subject_public_key.data.to_vec();
+        if public != member.public_key_bytes() {
+            bail!("{}: the certificate's key is not the one the roster lists for {identity}", cert.display());
+        }
+        let signer = load_key(&key)?;
+        if signer.public_key().as_ref() != public.as_slice() {
+            bail!("{}: this key does not belong to the certificate {}", key.display(), cert.display());
+        }
+        let keys = roster.admitted().map(|m| (m.name.clone(), m.public_key_bytes())).collect();
+        Ok(Credentials { roster, identity: member, ca_cert, cert, key, signer, keys })
+    }
+
+    /// Signs `msg` with this member's key.
+    pub fn sign(&self, msg: &[u8]) -> [u8; 64] {
+        self.signer.sign(msg).as_ref().try_into().expect("an Ed25519 signature is 64 bytes")
+    }
+
+    /// Whether `signature` is `member`'s over `msg`; false for a member not admitted.
+    pub fn verify(&self, member: &RobotId, msg: &[u8], signature: &[u8]) -> bool {
+        self.keys.get(member).is_some_and(|k| UnparsedPublicKey::new(&ED25519, k).verify(msg, signature).is_ok())
+    }
+}
+
+fn read_pem(path: &Path) -> Result<Pem> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (_, pem) =
+        x509_parser::pem::parse_x509_pem(&bytes).map_err(|_| anyhow!("{} is not a PEM file", path.display()))?;
+    Ok(pem)
+}
+
+fn parse<'a>(pem: &'a Pem, path: &Path) -> Result<x509_parser::certificate::X509Certificate<'a>> {
+    pem.parse_x509().map_err(|e| anyhow!("{} is not an X.509 certificate: {e}", path.display()))
+}
+
+fn load_key(path: &Path) -> Result<Ed25519KeyPair> {
+    use std::os::unix::fs::PermissionsExt;
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if let Ok(meta) = std::fs::metadata(path) {
+        if meta.permissions().mode() & 0o077 != 0 {
+            tracing::warn!(file = %path.display(), "private key readable by other users; chmod 600 it");
+        }
+    }
+    let der = rcgen::KeyPair::from_pem(&text)
+        .map(|k| k.serialize_der())
+        .map_err(|_| anyhow!("{} is not a PEM private key", path.display()))?;
+    Ed25519KeyPair::from_pkcs8_maybe_unchecked(&der)
+        .map_err(|_| anyhow!("{} is not an Ed25519 key (spwi fleets use Ed25519)", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::authority::{add, init, revoke, Validity};
+    use super::super::Role;
+    use super::*;
+    use spwi_proto::FleetId;
+    use std::os::unix::fs::PermissionsExt;
+
+    /// A fleet with robots r1 and r2 in a fresh directory, removed on drop.
+    struct Tmp(FleetDir);
+    impl Drop for Tmp {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0.root);
+        }
+    }
+    fn fleet(name: &str) -> Tmp {
+        let root = std::env::temp_dir().join(format!("spwi-creds-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let dir = FleetDir::new(root);
+        init(&dir, &FleetId::new("f").unwrap(), Validity::days(10)).unwrap();
+        for r in ["r1", "r2"] {
+            add(&dir, &RobotId::new(r).unwrap(), Role::Robot, Validity::days(10)).unwrap();
+        }
+        Tmp(dir)
+    }
+    fn err(dir: &FleetDir, who: &str) -> String {
+        format!("{:#}", Credentials::load(dir, who).unwrap_err())
+    }
+
+    #[test]
+    fn a_member_loads_signs_and_is_verified_by_the_roster() {
+        let t = fleet("ok");
+        let c = Credentials::load(&t.0, "r1").unwrap();
+        assert_eq!(c.identity.role, Role::Robot);
+        let sig = c.sign(b"tick 7");
+        assert!(c.verify(&RobotId::new("r1").unwrap(), b"tick 7", &sig));
+        assert!(!c.verify(&RobotId::new("r1").unwrap(), b"tick 8", &sig), "another message");
+        assert!(!c.verify(&RobotId::new("r2").unwrap(), b"tick 7", &sig), "another signer");
+        for (file, mode) in [(t.0.ca_key(), 0o600), (t.0.member_key("r1"), 0o600), (t.0.member_cert("r1"), 0o644)] {
+            let m = std::fs::metadata(&file).unwrap().permissions().mode() & 0o777;
+            assert_eq!(m, mode, "{}", file.display());
+        }
+        assert!(!format!("{c:?}").contains("PRIVATE"), "Debug must not show the key");
+    }
+
+    #[test]
+    fn each_bad_file_is_named() {
+        let t = fleet("bad");
+        let d = &t.0;
+        assert!(err(d, "r7").contains("r7 is not a member"));
+        // r1 presenting r2's key
+        std::fs::copy(d.member_key("r2"), d.root.join("r2.key")).unwrap();
+        std::fs::remove_file(d.member_key("r1")).unwrap();
+        assert!(err(d, "r1").contains("cannot read") && err(d, "r1").contains("r1.key"));
+        std::fs::copy(d.root.join("r2.key"), d.member_key("r1")).unwrap();
+        let e = err(d, "r1");
+        assert!(e.contains("r1.key: this key does not belong to the certificate"), "{e}");
+        // a certificate that is not r1's
+        std::fs::copy(d.member_cert("r2"), d.member_cert("r1")).unwrap();
+        assert!(err(d, "r1").contains("the certificate is for \"r2\", not \"r1\""), "{}", err(d, "r1"));
+        std::fs::write(d.member_cert("r1"), "not a certificate").unwrap();
+        assert!(err(d, "r1").contains("r1.crt is not a PEM file"), "{}", err(d, "r1"));
+        std::fs::write(d.member_key("r2"), "-----BEGIN PRIVATE KEY-----\nAAAA\n-----END PRIVATE KEY-----\n").unwrap();
+        assert!(err(d, "r2").contains("r2.key is not a PEM private key"), "{}", err(d, "r2"));
+        revoke(d, "r2").unwrap();
+        assert!(err(d, "r2").contains("r2 is revoked"));
+        assert!(revoke(d, "r2").unwrap_err().to_string().contains("already revoked"));
+        let e = add(d, &RobotId::new("r2").unwrap(), Role::Robot, Validity::days(1)).unwrap_err().to_string();
+        assert!(e.contains("never reused"), "{e}");
+    }
+
+    #[test]
+    fn a_certificate_of_another_ca_or_out_of_date_is_refused() {
+        let (a, b) = (fleet("ca-a"), fleet("ca-b"));
+        std::fs::copy(b.0.member_cert("r1"), a.0.member_cert("r1")).unwrap();
+        assert!(err(&a.0, "r1").contains("not signed by the fleet's CA"), "{}", err(&a.0, "r1"));
+        let now = time::OffsetDateTime::now_utc();
+        let old = Validity { not_before: now - time::Duration::days(9), not_after: now - time::Duration::days(2) };
+        add(&a.0, &RobotId::new("r3").unwrap(), Role::Robot, old).unwrap();
+        let e = err(&a.0, "r3");
+        assert!(e.contains("r3.crt: the certificate of r3 expired on"), "{e}");
+        assert!(init(&a.0, &FleetId::new("f").unwrap(), Validity::days(1))
+            .unwrap_err()
+            .to_string()
+            .contains("already holds"));
+    }
+}

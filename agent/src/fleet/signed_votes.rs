@@ -1,0 +1,159 @@
+//! Signed votes, so that a relayed ballot is worth its origin's word.
+//!
+//! Access control vouches for a message by the link it arrives on. A ballot relayed by
+//! a peer arrives on the relayer's link, and the relayer could have changed it. So in a
+//! secured fleet every robot signs its vote with its fleet key (Ed25519 is
+//! deterministic: the copy it relays later carries the same signature), and a relayed
+//! vote of another robot counts only if its origin's signature verifies against the
+//! roster. The relayer's own vote in its ballots needs none: its link vouches for it.
+//! A vote already heard directly or already verified is recognised by its bytes and
+//! not verified again, so each distinct vote costs at most one verification.
+//!
+//! The engine stays unaware: the daemon signs what the engine outputs and filters what
+//! it inputs, so recordings replay without keys.
+
+use super::Credentials;
+use crate::engine::{Input, Output};
+use spwi_proto::{RobotId, VoteMsg};
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+
+/// Ticks of authentic votes remembered (10 s at 10 Hz; relays come within a tick).
+const KEEP_TICKS: u64 = 100;
+
+/// Signs this robot's votes and checks the relayed votes of others.
+pub struct SignedVotes {
+    creds: Arc<Credentials>,
+    robot: RobotId,
+    /// Votes known authentic, as signed bytes, by tick and origin.
+    known: BTreeMap<u64, HashMap<RobotId, Vec<u8>>>,
+}
+
+impl SignedVotes {
+    pub fn new(creds: Arc<Credentials>, robot: RobotId) -> SignedVotes {
+        SignedVotes { creds, robot, known: BTreeMap::new() }
+    }
+
+    /// Signs this robot's own votes in an output (its vote, and its vote among the
+    /// ballots it relays).
+    pub fn sign(&self, out: &mut Output) {
+        let own = match out {
+            Output::Vote(v) => std::slice::from_mut(v),
+            Output::Ballots(b) => b.votes.as_mut_slice(),
+            _ => return,
+        };
+        for v in own.iter_mut().filter(|v| v.robot == self.robot && v.signature.is_empty()) {
+            v.signature = self.creds.sign(&v.signed_bytes()).to_vec();
+        }
+    }
+
+    /// Remembers votes heard directly; drops relayed votes whose origin's signature does
+    /// not verify. Returns how many were dropped.
+    pub fn check(&mut self, input: &mut Input) -> usize {
+        match input {
+            Input::Vote(v) => {
+                let bytes = v.signed_bytes();
+                self.remember(v, bytes);
+                0
+            }
+            Input::Ballots(b) => {
+                let before = b.votes.len();
+                let relayer = b.robot.clone();
+                b.votes.retain(|v| v.robot == relayer || self.authentic(v));
+                before - b.votes.len()
+            }
+            _ => 0,
+        }
+    }
+
+    fn authentic(&mut self, v: &VoteMsg) -> bool {
+        let bytes = v.signed_bytes();
+        if self.known.get(&v.tick).and_then(|m| m.get(&v.robot)) == Some(&bytes) {
+            return true;
+        }
+        let ok = self.creds.verify(&v.robot, &bytes, &v.signature);
+        if ok {
+            self.remember(v, bytes);
+        }
+        ok
+    }
+
+    fn remember(&mut self, v: &VoteMsg, bytes: Vec<u8>) {
+        self.known.entry(v.tick).or_default().insert(v.robot.clone(), bytes);
+        let newest = self.known.last_key_value().map_or(0, |(t, _)| *t);
+        while self.known.first_key_value().is_some_and(|(t, _)| t + KEEP_TICKS < newest) {
+            self.known.pop_first();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::authority::{add, init, Validity};
+    use super::super::{FleetDir, Role};
+    use super::*;
+    use spwi_proto::{BallotsMsg, FleetId, StepVote};
+
+    fn id(s: &str) -> RobotId {
+        RobotId::new(s).unwrap()
+    }
+
+    fn vote(robot: &str, tick: u64, confidence: f32) -> VoteMsg {
+        VoteMsg {
+            robot: id(robot),
+            instance: 1,
+            tick,
+            steps: vec![StepVote { class: 1, confidence }],
+            visibility: 1,
+            trust: 1.0,
+            quality: 1.0,
+            signature: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_relayed_vote_counts_only_with_its_origins_signature() {
+        let root = std::env::temp_dir().join(format!("spwi-signed-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let dir = FleetDir::new(&root);
+        init(&dir, &FleetId::new("f").unwrap(), Validity::days(1)).unwrap();
+        for r in ["a", "b", "c"] {
+            add(&dir, &id(r), Role::Robot, Validity::days(1)).unwrap();
+        }
+        let creds = |r: &str| Arc::new(Credentials::load(&dir, r).unwrap());
+        let (a, b) = (SignedVotes::new(creds("a"), id("a")), SignedVotes::new(creds("b"), id("b")));
+        let c = || SignedVotes::new(creds("c"), id("c"));
+        let signed = |s: &SignedVotes, v: VoteMsg| {
+            let mut out = Output::Vote(v);
+            s.sign(&mut out);
+            let Output::Vote(v) = out else { unreachable!() };
+            v
+        };
+        let from_a = signed(&a, vote("a", 5, 0.9));
+        assert_eq!(from_a.signature.len(), 64);
+        let mut again =
+            Output::Ballots(BallotsMsg { robot: id("a"), instance: 1, tick: 5, votes: vec![vote("a", 5, 0.9)] });
+        a.sign(&mut again);
+        let Output::Ballots(relayed_by_a) = again else { unreachable!() };
+        assert_eq!(relayed_by_a.votes[0], from_a, "the vote relayed is signed as the vote sent");
+
+        // b relays a's vote faithfully, a forged one, an unsigned one, and its own unsigned vote.
+        let forged = VoteMsg { steps: vec![StepVote { class: 2, confidence: 0.9 }], ..from_a.clone() };
+        let ballots = |votes| Input::Ballots(BallotsMsg { robot: id("b"), instance: 1, tick: 5, votes });
+        let mut input = ballots(vec![from_a.clone(), vote("b", 5, 0.5)]);
+        assert_eq!(c().check(&mut input), 0);
+        for bad in [forged.clone(), vote("a", 5, 0.9), signed(&b, vote("a", 5, 0.9))] {
+            let mut input = ballots(vec![bad, vote("b", 5, 0.5)]);
+            assert_eq!(c().check(&mut input), 1, "a vote of a not signed by a must not count");
+            let Input::Ballots(kept) = input else { unreachable!() };
+            assert_eq!(kept.votes, vec![vote("b", 5, 0.5)]);
+        }
+        // Once a's vote is known (heard directly), a copy of it needs no verification;
+        // anything else still does.
+        let mut c = c();
+        assert_eq!(c.check(&mut Input::Vote(from_a.clone())), 0);
+        assert_eq!(c.check(&mut ballots(vec![vote("a", 5, 0.9)])), 0, "the very vote heard directly");
+        assert_eq!(c.check(&mut ballots(vec![forged])), 1);
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+}
