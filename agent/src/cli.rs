@@ -4,6 +4,7 @@
 
 use crate::config::{AgentConfig, LogFormat};
 use crate::daemon::{self, Options};
+use crate::fleet::Role;
 use anyhow::{Context, Result};
 use clap::Parser;
 use spwi_proto::{FleetId, RobotId};
@@ -169,7 +170,11 @@ async fn run(args: Args) -> Result<()> {
     };
     let mut zenoh = crate::zenoh_config::build(args.zenoh_config.as_deref(), &args.cfg)?;
     let identity = args.identity.unwrap_or_else(|| robot.to_string());
-    let credentials = crate::fleet::secure_or_warn(&mut zenoh, args.fleet_dir.as_deref(), &identity, "spwi-agent")?;
+    let credentials =
+        crate::fleet::secure_or_warn(&mut zenoh, args.fleet_dir.as_deref(), &identity, Role::Robot, "spwi-agent")?;
+    if credentials.is_some() && identity != robot.as_str() {
+        tracing::warn!(%robot, identity, "presenting another robot's certificate: every peer will refuse this robot's messages");
+    }
     let fleet = fleet_of(args.fleet, credentials.as_deref())?;
     let models = tokio::task::spawn_blocking({
         let config = config.clone();

@@ -160,6 +160,7 @@ pub async fn run(
         backend: format!("{:?}", models.backend).to_lowercase(),
         temporal: format!("{:?}", config.tick.temporal).to_lowercase(),
         consensus: config.tick.consensus.name().to_owned(),
+        identity: credentials.as_ref().map(|c| c.identity.name.to_string()),
         members: engine.members(),
         last_decision: None,
         recent_decisions: Default::default(),
@@ -176,7 +177,8 @@ pub async fn run(
         http_addr = Some(bound);
         http_task = Some(tokio::spawn(fut));
     }
-    tracing::info!(%robot, %fleet, instance, http = ?http_addr, model_set = %models.manifest.name, "joined the fleet");
+    let secured = credentials.is_some();
+    tracing::info!(%robot, %fleet, instance, secured, http = ?http_addr, model_set = %models.manifest.name, "joined the fleet");
     if let Some(ready) = ready {
         let _ = ready.send(Started { status: status.clone(), http: http_addr });
     }

@@ -31,6 +31,9 @@ pub struct Status {
     pub temporal: String,
     /// The consensus rule: "paper" or "trust".
     pub consensus: String,
+    /// Who may join: the identity this daemon presents in a secured fleet (mutual TLS,
+    /// access control from the roster); `None` in an open fleet.
+    pub identity: Option<String>,
     /// Live members, this robot included.
     pub members: Vec<RobotId>,
     pub last_decision: Option<DecisionMsg>,

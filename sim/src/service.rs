@@ -11,6 +11,7 @@ use crate::world_args::WorldArgs;
 use anyhow::{anyhow, Result};
 use spwi_agent::cli::{init_tracing, spawn_signal_handler};
 use spwi_agent::config::LogFormat;
+use spwi_agent::fleet::Role;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
 use spwi_world::layout::Layout;
@@ -159,7 +160,8 @@ pub fn main(a: WorldServiceArgs) -> Result<()> {
     let WorldServiceArgs { fleet, fleet_dir, identity, world, seed, zenoh_config, cfg, tick_ms, stuck_slot } = a;
     init_tracing(LogFormat::Human);
     let mut zenoh = spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?;
-    let credentials = spwi_agent::fleet::secure_or_warn(&mut zenoh, fleet_dir.as_deref(), &identity, "spwi-sim world")?;
+    let credentials =
+        spwi_agent::fleet::secure_or_warn(&mut zenoh, fleet_dir.as_deref(), &identity, Role::World, "spwi-sim world")?;
     let fleet = spwi_agent::cli::fleet_of(fleet, credentials.as_deref())?;
     let floor = world.floor()?;
     if let Some(s) = stuck_slot {

@@ -7,7 +7,8 @@
 //! certificate never get a link, never count as members and never reach anyone; a
 //! member cannot publish a vote, embedding, decision or detections as another robot nor
 //! hold its liveliness token (also as a whole daemon started under a stolen id); a
-//! revoked robot cannot rejoin with its old files.
+//! revoked robot cannot rejoin with its old files; a router on the path forwards a
+//! member's messages and refuses what the member may not say (it runs the same rules).
 //! Run: `cargo test -p spwi-tests --test security`.
 
 use spwi_agent::config::AgentConfig;
@@ -25,7 +26,7 @@ use zenoh::Wait;
 
 const TICK: Duration = Duration::from_millis(100);
 
-/// A fleet directory with members world, r1, r2, r3 and r4 (whose certificate expired
+/// A fleet directory with members world, router, r1, r2, r3 and r4 (whose certificate expired
 /// yesterday), and a second CA of the same fleet name with a robot r9.
 struct Dirs {
     root: PathBuf,
@@ -41,6 +42,7 @@ impl Dirs {
         let f = FleetId::new(format!("sec-{test}")).unwrap();
         authority::init(&fleet, &f, Validity::days(30)).unwrap();
         authority::add(&fleet, &id("world"), Role::World, Validity::days(30)).unwrap();
+        authority::add(&fleet, &id("router"), Role::Router, Validity::days(30)).unwrap();
         for r in ["r1", "r2", "r3"] {
             authority::add(&fleet, &id(r), Role::Robot, Validity::days(30)).unwrap();
         }
@@ -340,4 +342,49 @@ fn copy_dir(from: &Path, to: &Path) {
             std::fs::copy(entry.path(), target).unwrap();
         }
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_router_on_the_path_enforces_the_rules_it_is_trusted_with() {
+    let _serial = serial().await;
+    within!(60, "the test", async {
+        let dirs = Dirs::make("router");
+        // The router (as spwi-router configures it), the hub connected to it, and r3 as
+        // a client of the router: everything r3 says reaches the hub through the router,
+        // which is the last hop the hub judges.
+        let creds = Credentials::load(&dirs.fleet, "router").unwrap();
+        let mut config =
+            zenoh_config::build(None, &[r#"mode:"router""#.into(), r#"listen/endpoints:["tcp/127.0.0.1:0"]"#.into()])
+                .unwrap();
+        config.insert_json5("scouting/multicast/enabled", "false").unwrap();
+        spwi_agent::fleet::secure::apply(&mut config, &creds).unwrap();
+        let router = open(config, "router").await;
+        let at = router.info().locators().await.into_iter().next().unwrap().to_string();
+        assert!(at.starts_with("tls/"), "the router listens on {at}");
+        let (hub, _) = secured_peer(&dirs.fleet.root, "world", std::slice::from_ref(&at)).unwrap();
+        let hub = open(hub, "hub").await;
+        let fleet = FleetId::new("sec-router").unwrap();
+        let seen = Arc::new(Mutex::new(Vec::new()));
+        let s = seen.clone();
+        let _sub = hub
+            .declare_subscriber(keys::everything(&fleet))
+            .callback(move |sample| s.lock().unwrap().push(sample.key_expr().as_str().to_owned()))
+            .await
+            .unwrap();
+        let (mut client, _) = secured_peer(&dirs.fleet.root, "r3", std::slice::from_ref(&at)).unwrap();
+        client.insert_json5("mode", r#""client""#).unwrap();
+        client.insert_json5("listen/endpoints", "[]").unwrap();
+        let r3 = open(client, "r3").await;
+        tokio::time::sleep(Duration::from_millis(500)).await; // declarations reach the router
+        tokio::join!(
+            impersonate(r3.clone(), fleet.clone(), id("r2"), Duration::from_secs(2)),
+            impersonate(r3.clone(), fleet.clone(), id("r3"), Duration::from_secs(2)),
+        );
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let seen = seen.lock().unwrap().clone();
+        let own = seen.iter().filter(|k| k.contains("/robot/r3/")).count();
+        let forged = seen.iter().filter(|k| k.contains("/robot/r2/")).count();
+        assert!(own > 0, "the router forwarded nothing of r3's own: the test proves nothing");
+        assert_eq!(forged, 0, "the router forwarded r3's messages as r2");
+    });
 }

@@ -58,12 +58,14 @@ impl FleetDir {
     }
 }
 
-/// Secures `zenoh` for `identity` of the fleet in `dir`, or warns that the fleet is open.
-/// Returns the credentials (their roster names the fleet).
+/// Secures `zenoh` for `identity` of the fleet in `dir`, which must be a member of
+/// `role` (the role decides what the others accept from it), or warns that the fleet
+/// is open. Returns the credentials (their roster names the fleet).
 pub fn secure_or_warn(
     zenoh: &mut zenoh::Config,
     dir: Option<&Path>,
     identity: &str,
+    role: Role,
     program: &str,
 ) -> anyhow::Result<Option<std::sync::Arc<Credentials>>> {
     let Some(dir) = dir else {
@@ -74,6 +76,14 @@ pub fn secure_or_warn(
         return Ok(None);
     };
     let creds = Credentials::load(&FleetDir::new(dir), identity)?;
+    if creds.identity.role != role {
+        anyhow::bail!(
+            "{identity} is a {} in {}; {program} presents the certificate of a {}",
+            creds.identity.role.as_str(),
+            FleetDir::new(dir).roster().display(),
+            role.as_str()
+        );
+    }
     secure::apply(zenoh, &creds)?;
     tracing::info!(
         identity,
@@ -83,4 +93,31 @@ pub fn secure_or_warn(
         "secured fleet: mutual TLS, access control from the roster"
     );
     Ok(Some(std::sync::Arc::new(creds)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::authority::{add, init, Validity};
+    use super::*;
+    use spwi_proto::{FleetId, RobotId};
+
+    #[test]
+    fn a_process_presents_a_member_of_its_own_role_of_its_own_fleet() {
+        let root = std::env::temp_dir().join(format!("spwi-fleet-role-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let dir = FleetDir::new(&root);
+        init(&dir, &FleetId::new("plant7").unwrap(), Validity::days(1)).unwrap();
+        add(&dir, &RobotId::new("world").unwrap(), Role::World, Validity::days(1)).unwrap();
+        add(&dir, &RobotId::new("r1").unwrap(), Role::Robot, Validity::days(1)).unwrap();
+        let mut z = zenoh::Config::default();
+        let e = secure_or_warn(&mut z, Some(&root), "world", Role::Robot, "spwi-agent").unwrap_err().to_string();
+        assert!(e.contains("world is a world") && e.contains("a robot"), "{e}");
+        let creds = secure_or_warn(&mut z, Some(&root), "r1", Role::Robot, "spwi-agent").unwrap().unwrap();
+        assert_eq!(z.get_json("transport/link/protocols").unwrap(), r#"["tls"]"#);
+        assert_eq!(crate::cli::fleet_of(None, Some(&creds)).unwrap().as_str(), "plant7");
+        let e = crate::cli::fleet_of(Some(FleetId::new("other").unwrap()), Some(&creds)).unwrap_err().to_string();
+        assert!(e.contains("--fleet other, but the fleet directory is for fleet plant7"), "{e}");
+        assert!(secure_or_warn(&mut zenoh::Config::default(), None, "r1", Role::Robot, "x").unwrap().is_none());
+        std::fs::remove_dir_all(&root).unwrap();
+    }
 }
