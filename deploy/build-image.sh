@@ -16,6 +16,7 @@ ctx="$(mktemp -d /tmp/spwi-image.XXXXXX)"
 trap 'rm -rf "$ctx"' EXIT
 mkdir -p "$ctx/bin" "$ctx/models" "$ctx/config"
 cp "$CARGO_TARGET_DIR"/release/{spwi-agent,spwi-sim,spwi-router} "$ctx/bin/"
+cp deploy/fleet-entry "$ctx/bin/spwi-fleet-entry"
 for set in models/*/; do  # every shipped model set (a folder with a manifest)
   [ -f "$set/manifest.json" ] && cp -r "$set" "$ctx/models/"
 done

@@ -1,12 +1,15 @@
 #!/usr/bin/env python3
 """The container fleet end to end (driven by tests/compose-e2e.sh, which builds the image).
 
-Starts deploy/compose.yaml (router, world, 4 agents) as its own compose project and
-checks, through each agent's /status (read from the host over the Docker network):
+Starts deploy/compose.yaml (the secured fleet: certificates, router, world, 4 agents)
+as its own compose project and checks, through each agent's /status (read from the
+host over the Docker network):
 
 1. all 4 agents are healthy, count 4 members and decide the same class tick by tick;
    once the fleet has settled, over 30 s, the robots' own comparisons of their
    decisions with their peers' agree at least 99.5 % of the time;
+   rogues: a container without a certificate (calling itself mallory) and one holding
+   a real robot certificate but claiming another robot's id are never counted;
 2. `docker kill` one agent: the other 3 count 3 within 1.5 s and keep deciding;
 3. `--scale agent=6`: the newcomers (and the killed one, restarted) are counted and vote;
 4. `docker network disconnect` one agent: the others drop it within 1.5 s; after
@@ -67,7 +70,8 @@ def compose(*args):
 
 
 def agents():
-    """Running agent containers: id -> (robot id = host name, IP on the fleet network)."""
+    """Running agent containers: id -> (host name, IP on the fleet network). The robot
+    id is the identity the container claimed: read it from its /status."""
     out = {}
     for cid in compose("ps", "-q", "agent").split():
         info = json.loads(sh("docker", "inspect", cid))[0]
@@ -205,8 +209,46 @@ def real_packet_loss():
         drop_packets(ag, 0)
 
 
+def rogues(ips):
+    """Two rogue containers on the fleet's network for 8 s: one without a certificate
+    (the open mode) calling itself mallory, and one presenting robot-16's certificate
+    while claiming to be robot-15 (an admitted identity no agent uses). Neither may be
+    counted by anyone; the members stay the 4 agents."""
+    image = os.environ.get("SPWI_IMAGE", "spwi:latest")
+    fleet_dir = "/var/lib/spwi/fleet"
+    runs = {
+        "mallory": ["--robot-id", "mallory"],
+        "robot-15": ["--fleet-dir", fleet_dir, "--identity", "robot-16", "--robot-id", "robot-15"],
+    }
+    started = []
+    try:
+        for robot, args in runs.items():
+            name = f"{PROJECT}-rogue-{robot}"
+            sh("docker", "run", "-d", "--name", name, "--network", NETWORK,
+               "-v", f"{PROJECT}_fleet:{fleet_dir}", image, *args)
+            started.append(name)
+        end = time.monotonic() + 8.0
+        while time.monotonic() < end:
+            for ip in ips:
+                s = must_status(ip)
+                if set(s["members"]) & set(runs):
+                    fail(f"{s['robot']} counts a rogue: members {s['members']}")
+                if len(s["members"]) != 4:
+                    fail(f"{s['robot']} counts {len(s['members'])} members with the rogues about: {s['members']}")
+            time.sleep(0.2)
+        running = [n for n in started if sh("docker", "inspect", "-f", "{{.State.Running}}", n) == "true"]
+        print(f"rogues: no certificate (mallory) and a stolen id (robot-16 as robot-15) never counted "
+              f"over 8 s; still trying at the end: {len(running)} of 2")
+        if len(running) < 2:
+            logs = {n: sh("docker", "logs", "--tail", "3", n, check=False) for n in started}
+            fail(f"a rogue container exited early, so the test proves less than it says: {logs}")
+    finally:
+        for n in started:
+            sh("docker", "rm", "-f", n, check=False)
+
+
 def stuck_camera():
-    compose("down", "--timeout", "1", "--remove-orphans")
+    compose("down", "-v", "--timeout", "1", "--remove-orphans")
     sh(*COMPOSE, "-f", STUCK, "up", "-d", "--scale", "agent=4")
     ips = [ip for _, ip in agents().values()]
     wait_until("4 agents counting 4 members", all_count(ips, 4), 60)
@@ -254,6 +296,7 @@ def main():
     figures["agreement_4_settled"] = round(steady, 4)
     if steady < STEADY_AGREEMENT:
         fail(f"a settled fleet agrees on only {steady:.2%} of compared decisions (< {STEADY_AGREEMENT:.1%})")
+    rogues(ips)
 
     # 2. kill one
     victim = next(iter(ag))
@@ -280,7 +323,7 @@ def main():
     figures["scale_to_6_s"] = round(took, 1)
     # A robot votes on the ticks it sees the worker: every newcomer that has seen it
     # must be among the voters of the team's decisions.
-    newcomers = {robot for c, (robot, _) in ag.items() if c not in before}
+    newcomers = {must_status(ip)["robot"] for c, (_, ip) in ag.items() if c not in before}
     voted = set()
 
     def newcomers_voted():
@@ -300,7 +343,8 @@ def main():
         fail(f"agents agree on only {share:.1%} of ticks")
 
     # 4. cut one off the network, then plug it back
-    cut, (cut_robot, _) = next(iter(ag.items()))
+    cut, (_, cut_ip) = next(iter(ag.items()))
+    cut_robot = must_status(cut_ip)["robot"]
     rest = [ip for c, (_, ip) in ag.items() if c != cut]
     sh("docker", "network", "disconnect", NETWORK, cut)
     _, took = wait_until("the other 5 counting 5 after network disconnect", all_count(rest, 5), 10, poll=0.02)
@@ -339,9 +383,9 @@ if __name__ == "__main__":
     except Exception as e:  # noqa: BLE001 - report, tear down, fail
         traceback.print_exc()
         print(f"compose end-to-end: FAIL: {e}", file=sys.stderr)
-        for svc in ("router", "world", "agent"):
+        for svc in ("fleet-setup", "router", "world", "agent"):
             logs = subprocess.run([*COMPOSE, "logs", "--tail", "15", svc], capture_output=True, text=True).stdout
             print(f"--- last logs of {svc}:\n{logs}", file=sys.stderr)
         sys.exit(1)
     finally:
-        subprocess.run([*COMPOSE, "down", "--timeout", "1", "--remove-orphans"], capture_output=True)
+        subprocess.run([*COMPOSE, "down", "-v", "--timeout", "1", "--remove-orphans"], capture_output=True)

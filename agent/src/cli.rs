@@ -231,13 +231,7 @@ pub fn main() -> ExitCode {
     let mut args = Args::parse();
     if let Some(Command::Fleet(cmd)) = args.command.take() {
         init_tracing(LogFormat::Human);
-        return match crate::fleet::cli::run(cmd) {
-            Ok(()) => ExitCode::SUCCESS,
-            Err(e) => {
-                eprintln!("spwi-agent fleet: error: {e:#}");
-                ExitCode::FAILURE
-            }
-        };
+        return run_main("spwi-agent fleet", async { crate::fleet::cli::run(cmd) });
     }
     if let Some(addr) = args.probe {
         return if probe(addr) { ExitCode::SUCCESS } else { ExitCode::FAILURE };

@@ -138,6 +138,18 @@ async fn impersonate(session: zenoh::Session, fleet: FleetId, robot: RobotId, pe
     }
 }
 
+/// A daemon calling itself `robot` with the Zenoh config and credentials given.
+fn agent_as(hub: &Hub, robot: &str, zenoh: zenoh::Config, credentials: Option<Arc<Credentials>>) -> Options {
+    Options {
+        robot: id(robot),
+        fleet: hub.fleet.clone(),
+        config: AgentConfig::default(),
+        zenoh,
+        record: None,
+        credentials,
+    }
+}
+
 /// Runs the publisher for `robots` until `ticks` ticks have passed.
 async fn run_ticks(hub: &Hub, robots: Vec<RobotId>, ticks: u64) {
     let publisher = Publisher::start(hub, robots, TICK);
@@ -246,15 +258,7 @@ async fn a_member_cannot_speak_for_another_robot() {
         // A whole daemon calling itself r2 with r3's certificate, and r3's raw session
         // speaking for r2 (and, as a control, for itself).
         let (zenoh, credentials) = hub.member_config("r3").unwrap();
-        let opts = Options {
-            robot: id("r2"),
-            fleet: hub.fleet.clone(),
-            config: AgentConfig::default(),
-            zenoh,
-            record: None,
-            credentials,
-        };
-        let impostor = InProcessAgent::start_with(opts, &models).await;
+        let impostor = InProcessAgent::start_with(agent_as(&hub, "r2", zenoh, credentials), &models).await;
         let (raw, _) = secured_peer(&dirs.fleet.root, "r3", std::slice::from_ref(&hub.locator)).unwrap();
         let r3 = open(raw, "r3").await;
 
@@ -309,15 +313,7 @@ async fn a_revoked_robot_cannot_rejoin_with_its_old_files() {
         let models = models();
         let r1 = InProcessAgent::start(&hub, &id("r1"), &models, AgentConfig::default()).await;
         let (zenoh, creds) = secured_peer(&stale, "r2", std::slice::from_ref(&hub.locator)).unwrap();
-        let opts = Options {
-            robot: id("r2"),
-            fleet: hub.fleet.clone(),
-            config: AgentConfig::default(),
-            zenoh,
-            record: None,
-            credentials: Some(creds),
-        };
-        let r2 = InProcessAgent::start_with(opts, &models).await;
+        let r2 = InProcessAgent::start_with(agent_as(&hub, "r2", zenoh, Some(creds)), &models).await;
         let since = Instant::now();
         run_ticks(&hub, vec![id("r1"), id("r2")], 30).await;
 

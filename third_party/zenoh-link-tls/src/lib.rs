@@ -77,6 +77,7 @@ zconfigurable! {
     // to the remote end or (2) a timeout expires. The timeout is expressed in seconds.
     // More info on the LINGER option and its dynamics can be found at:
     // https://blog.netherlabs.nl/articles/2009/01/18/the-ultimate-so_linger-page-or-why-is-my-tcp-not-reliable
+    // (spwi patch: no longer applied; see unicast.rs)
     static ref TLS_LINGER_TIMEOUT: i32 = 10;
     // Amount of time in microseconds to throttle the accept loop upon an error.
     // Default set to 100 ms.

@@ -14,7 +14,6 @@
 #[cfg(all(feature = "uring", target_os = "linux"))]
 use std::os::fd::RawFd;
 use std::{
-    convert::TryInto,
     fmt::{self, Debug},
     net::SocketAddr,
     sync::Arc,
@@ -47,7 +46,7 @@ use zenoh_result::{zerror, ZResult};
 
 use crate::{
     utils::{get_tls_addr, get_tls_host, get_tls_server_name, TlsClientConfig, TlsServerConfig},
-    TLS_ACCEPT_THROTTLE_TIME, TLS_DEFAULT_MTU, TLS_LINGER_TIMEOUT, TLS_LOCATOR_PREFIX,
+    TLS_ACCEPT_THROTTLE_TIME, TLS_DEFAULT_MTU, TLS_LOCATOR_PREFIX,
 };
 
 #[derive(Default, Debug, PartialEq, Eq, Hash)]
@@ -62,6 +61,9 @@ pub struct LinkUnicastTls {
     // never holds up a write.
     reader: AsyncMutex<ReadHalf<TlsStream<TcpStream>>>,
     writer: AsyncMutex<WriteHalf<TlsStream<TcpStream>>>,
+    // The TCP socket under both halves (owned by them, valid as long as self), so that
+    // `close` can shut it down without waiting for a write stuck on a dead peer.
+    fd: std::os::fd::RawFd,
     // The source socket address of this link (address used on the local host)
     src_addr: SocketAddr,
     src_locator: Locator,
@@ -92,18 +94,12 @@ impl LinkUnicastTls {
             );
         }
 
-        // Set the TLS linger option
-        #[allow(deprecated)]
-        if let Err(err) = tcp_stream.set_linger(Some(Duration::from_secs(
-            (*TLS_LINGER_TIMEOUT).try_into().unwrap(),
-        ))) {
-            tracing::warn!(
-                "Unable to set LINGER option on TLS link {} => {}: {}",
-                src_addr,
-                dst_addr,
-                err
-            );
-        }
+        // spwi patch: no SO_LINGER (upstream sets 10 s). With a linger, closing the socket
+        // of a peer that vanished (unplugged, its lease run out) blocks the thread that
+        // drops the link, a Zenoh runtime thread, for 10 s on data that can no longer be
+        // delivered, and the session stops with it: 5-10 s without decisions after a
+        // `docker network disconnect` in the compose test. Without one, close returns at
+        // once and the kernel still delivers what it can in the background.
 
         // Compute the MTU
         // See IETF RFC6691: https://datatracker.ietf.org/doc/rfc6691/
@@ -129,10 +125,12 @@ impl LinkUnicastTls {
         }
 
         // Build the Tls object
+        let fd = std::os::fd::AsRawFd::as_raw_fd(tcp_stream);
         let (reader, writer) = tokio::io::split(socket);
         LinkUnicastTls {
             reader: AsyncMutex::new(reader),
             writer: AsyncMutex::new(writer),
+            fd,
             src_addr,
             src_locator: Locator::new(TLS_LOCATOR_PREFIX, src_addr.to_string(), "").unwrap(),
             dst_addr,
@@ -145,14 +143,21 @@ impl LinkUnicastTls {
 
     async fn close(&self) -> ZResult<()> {
         tracing::trace!("Closing TLS link: {}", self);
-        let mut writer = zasynclock!(self.writer);
-        // Flush the TLS stream
-        let res = writer.flush().await;
-        tracing::trace!("TLS link flush {}: {:?}", self, res);
-        // close_notify, then shut the underlying TCP stream down for writing
-        let res = writer.shutdown().await;
-        tracing::trace!("TLS link shutdown {}: {:?}", self, res);
-        res.map_err(|e| zerror!(e).into())
+        // An orderly close (flush, close_notify) only when no write is in flight: a write
+        // stuck on a dead peer (unplugged, its lease run out) would hold the close up for
+        // TCP's retransmission timeout, and with it the transport (upstream waits here).
+        if let Ok(mut writer) = self.writer.try_lock() {
+            let res = tokio::time::timeout(Duration::from_millis(100), writer.shutdown()).await;
+            tracing::trace!("TLS link close_notify {}: {:?}", self, res);
+        }
+        // Then the socket itself, both ways, as the TCP link does: whatever read or write
+        // is still pending fails at once.
+        // SAFETY: the fd belongs to the stream the two halves own, alive as long as self.
+        let fd = unsafe { std::os::fd::BorrowedFd::borrow_raw(self.fd) };
+        match socket2::SockRef::from(&fd).shutdown(std::net::Shutdown::Both) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotConnected => Err(zerror!(e).into()),
+            _ => Ok(()),
+        }
     }
 }
 
