@@ -97,10 +97,13 @@ pub fn probe(addr: std::net::SocketAddr) -> bool {
 }
 
 /// Sets up `tracing`: `RUST_LOG` wins; otherwise info for spwi and only warnings and
-/// errors from Zenoh, whose routine churn messages look alarming.
+/// errors from Zenoh, whose routine churn messages look alarming. Zenoh's TLS setup
+/// warns on every link that it skips host-name checks, which a secured fleet does on
+/// purpose (identity is the certificate's name, checked by the access rules).
 pub fn init_tracing(format: LogFormat) {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,zenoh=warn,zenoh_transport=error"));
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        tracing_subscriber::EnvFilter::new("info,zenoh=warn,zenoh_transport=error,zenoh_link_tls::utils=error")
+    });
     let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
     let _ = match format {
         LogFormat::Human => builder.try_init(),
@@ -204,26 +207,29 @@ fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {
     let recording = crate::record::read(file)?;
     let models = daemon::load_models(config)?;
     let replayed = crate::record::replay(&recording, &models)?;
-    let decisions = replayed.iter().filter(|o| matches!(o, crate::engine::Output::Decision(_))).count();
-    if replayed != recording.outputs {
-        let at = replayed
-            .iter()
-            .zip(&recording.outputs)
-            .position(|(a, b)| a != b)
-            .unwrap_or(replayed.len().min(recording.outputs.len()));
-        anyhow::bail!(
-            "replay differs from the recording at output {at} ({} replayed, {} recorded)",
-            replayed.len(),
-            recording.outputs.len()
-        );
-    }
+    let decisions = replayed.outputs.iter().filter(|o| matches!(o, crate::engine::Output::Decision(_))).count();
+    first_difference("output", &replayed.outputs, &recording.outputs)?;
+    first_difference("peer state (trust, frozen feeds)", &replayed.states, &recording.states)?;
     println!(
-        "replayed {} inputs of robot {}: {} outputs, {decisions} decisions, identical to the recording",
+        "replayed {} inputs of robot {}: {} outputs, {decisions} decisions and their peer states, identical to the recording",
         recording.inputs.len(),
         recording.config.engine.robot,
-        replayed.len()
+        replayed.outputs.len()
     );
     Ok(())
+}
+
+/// An error naming the first `what` in which a replay differs from the recording.
+fn first_difference<T: PartialEq>(what: &str, replayed: &[T], recorded: &[T]) -> Result<()> {
+    if replayed == recorded {
+        return Ok(());
+    }
+    let at = replayed.iter().zip(recorded).position(|(a, b)| a != b).unwrap_or(replayed.len().min(recorded.len()));
+    anyhow::bail!(
+        "replay differs from the recording at {what} {at} ({} replayed, {} recorded)",
+        replayed.len(),
+        recorded.len()
+    )
 }
 
 /// `main` of `spwi-agent`.

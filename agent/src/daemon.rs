@@ -14,7 +14,7 @@
 use crate::config::AgentConfig;
 use crate::engine::{Engine, EngineConfig, Input, Output};
 use crate::model::ModelSet;
-use crate::record::{RecordedConfig, Recorder};
+use crate::record::{PeerState, RecordedConfig, Recorder};
 use crate::status::{RecentDecision, SharedStatus, Status};
 use anyhow::{anyhow, bail, Result};
 use spwi_proto::keys::{self, Topic};
@@ -224,7 +224,9 @@ pub async fn run(
         }
         let outputs = engine.handle(input, now);
         if let Some(r) = recorder.as_mut() {
-            if let Err(e) = outputs.iter().try_for_each(|o| r.output(o, now)) {
+            let states = PeerState::after(&engine, &outputs);
+            let recorded = outputs.iter().try_for_each(|o| r.output(o, now));
+            if let Err(e) = recorded.and_then(|()| states.iter().try_for_each(|s| r.state(s, now))) {
                 tracing::error!("recording stopped: {e:#}");
                 recorder = None;
             }

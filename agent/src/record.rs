@@ -3,7 +3,8 @@
 //! engine time it was handled at, each output, and the engine's configuration. Replay
 //! feeds the recorded inputs, at their recorded times, to a fresh engine with the same
 //! models: the engine is deterministic, so it must say exactly what was recorded — a
-//! way to reproduce a field incident on a desk, bit for bit.
+//! way to reproduce a field incident on a desk, bit for bit, its judgement of its peers
+//! (trust, frozen feeds) included.
 //!
 //! Channels (message encoding `spwi-bincode-v1`: the `proto` codec's bytes):
 //!
@@ -14,6 +15,7 @@
 //! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (JSON) |
 //! | `/spwi/in/poll` | empty: time passed |
 //! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision` | a published message |
+//! | `/spwi/state` | after each decision, whom the robot trusts and whose feed it sets aside ([`PeerState`], JSON) |
 //!
 //! Log and publish times are nanoseconds of engine time (since the daemon started).
 
@@ -38,6 +40,32 @@ pub struct RecordedConfig {
     pub model_set: String,
 }
 
+/// The engine's judgement of its peers right after it decided `tick`: the trust it has
+/// learned of each robot (itself included), whether its own camera is frozen, and whose
+/// feeds it leaves out. Recorded so that a replay is checked on these too, and so that
+/// a recording opened in Foxglove shows why a robot's vote weighed what it did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PeerState {
+    pub tick: u64,
+    pub trust: BTreeMap<RobotId, f32>,
+    pub feed_stale: bool,
+    pub stale_peers: Vec<RobotId>,
+}
+
+impl PeerState {
+    pub fn of(engine: &Engine, tick: u64) -> PeerState {
+        PeerState { tick, trust: engine.trust(), feed_stale: engine.feed_is_stale(), stale_peers: engine.stale_peers() }
+    }
+
+    /// One state per decision among `outputs`, as the engine stands after them.
+    pub fn after(engine: &Engine, outputs: &[Output]) -> Vec<PeerState> {
+        outputs
+            .iter()
+            .filter_map(|o| if let Output::Decision(d) = o { Some(PeerState::of(engine, d.tick)) } else { None })
+            .collect()
+    }
+}
+
 #[derive(Serialize, Deserialize)]
 struct MembershipRecord {
     robot: RobotId,
@@ -51,7 +79,7 @@ pub struct Recorder {
     sequence: u32,
 }
 
-const TOPICS: [(&str, &str); 12] = [
+const TOPICS: [(&str, &str); 13] = [
     ("/spwi/config", "json"),
     ("/spwi/in/detections", BINCODE),
     ("/spwi/in/embedding", BINCODE),
@@ -64,6 +92,7 @@ const TOPICS: [(&str, &str); 12] = [
     ("/spwi/out/vote", BINCODE),
     ("/spwi/out/ballots", BINCODE),
     ("/spwi/out/decision", BINCODE),
+    ("/spwi/state", "json"),
 ];
 
 impl Recorder {
@@ -122,6 +151,10 @@ impl Recorder {
         }
     }
 
+    pub fn state(&mut self, state: &PeerState, now: Duration) -> Result<()> {
+        self.write("/spwi/state", now, &serde_json::to_vec(state)?)
+    }
+
     /// Writes the summary and closes the file; a recording cut short (the process
     /// killed) loses at most its last unfinished chunk.
     pub fn finish(mut self) -> Result<()> {
@@ -136,6 +169,14 @@ pub struct Recording {
     pub config: RecordedConfig,
     pub inputs: Vec<(Duration, Input)>,
     pub outputs: Vec<Output>,
+    pub states: Vec<PeerState>,
+}
+
+/// What a replay says: its outputs and its judgements of the peers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Replayed {
+    pub outputs: Vec<Output>,
+    pub states: Vec<PeerState>,
 }
 
 /// Reads a recording; any record that does not decode is an error naming its topic
@@ -143,7 +184,7 @@ pub struct Recording {
 pub fn read(path: &Path) -> Result<Recording> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read recording {}", path.display()))?;
     let mut config = None;
-    let (mut inputs, mut outputs) = (Vec::new(), Vec::new());
+    let (mut inputs, mut outputs, mut states) = (Vec::new(), Vec::new(), Vec::new());
     for m in mcap::MessageStream::new(&bytes).map_err(|e| anyhow!("{}: not an MCAP file: {e}", path.display()))? {
         let m = m.map_err(|e| anyhow!("{}: {e}", path.display()))?;
         let now = Duration::from_nanos(m.log_time);
@@ -165,15 +206,16 @@ pub fn read(path: &Path) -> Result<Recording> {
             "/spwi/out/vote" => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
             "/spwi/out/ballots" => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
             "/spwi/out/decision" => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
+            "/spwi/state" => states.push(serde_json::from_slice(d).with_context(ctx)?),
             other => bail!("{}: unknown topic {other:?} (not a spwi recording?)", path.display()),
         }
     }
     let config = config.with_context(|| format!("{}: no /spwi/config record", path.display()))?;
-    Ok(Recording { config, inputs, outputs })
+    Ok(Recording { config, inputs, outputs, states })
 }
 
 /// Runs the recorded inputs through a fresh engine and returns what it says.
-pub fn replay(recording: &Recording, models: &Arc<ModelSet>) -> Result<Vec<Output>> {
+pub fn replay(recording: &Recording, models: &Arc<ModelSet>) -> Result<Replayed> {
     if models.manifest.name != recording.config.model_set {
         bail!(
             "the recording was made with model set {:?}, not {:?}: replay with the same models",
@@ -183,9 +225,11 @@ pub fn replay(recording: &Recording, models: &Arc<ModelSet>) -> Result<Vec<Outpu
     }
     let cfg = recording.config.engine.clone();
     let mut engine = Engine::new(cfg.clone(), models.inference(cfg.temporal)?);
-    let mut out = Vec::new();
+    let (mut outputs, mut states) = (Vec::new(), Vec::new());
     for (now, input) in &recording.inputs {
-        out.extend(engine.handle(input.clone(), *now));
+        let out = engine.handle(input.clone(), *now);
+        states.extend(PeerState::after(&engine, &out));
+        outputs.extend(out);
     }
-    Ok(out)
+    Ok(Replayed { outputs, states })
 }

@@ -157,12 +157,17 @@ async fn a_recorded_run_replays_to_the_same_decisions_bit_for_bit() {
 
         let recording = spwi_agent::record::read(&file).unwrap();
         let replayed = spwi_agent::record::replay(&recording, &models).unwrap();
-        assert_eq!(replayed, recording.outputs, "replay must reproduce every output");
+        assert_eq!(replayed.outputs, recording.outputs, "replay must reproduce every output");
+        assert_eq!(replayed.states, recording.states, "and every judgement of the peers");
+        let trusted = recording.states.last().expect("a peer state per decision").trust.len();
+        assert!(trusted >= 2, "the last state judges {trusted} robots: the recording shows no peer");
         let decided: Vec<_> = replayed
+            .outputs
             .iter()
             .filter_map(|o| if let spwi_agent::engine::Output::Decision(d) = o { Some(d.clone()) } else { None })
             .collect();
         assert!(decided.len() >= 20, "only {} decisions recorded", decided.len());
+        assert_eq!(recording.states.len(), decided.len(), "one peer state per decision");
         // and they are the decisions the fleet saw on the wire
         let live = collector.by_robot();
         for d in &decided {
