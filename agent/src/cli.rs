@@ -178,7 +178,7 @@ async fn run(args: Args) -> Result<()> {
     if credentials.is_some() && identity != robot.as_str() {
         tracing::warn!(%robot, identity, "presenting another robot's certificate: every peer will refuse this robot's messages");
     }
-    let fleet = fleet_of(args.fleet, credentials.as_deref())?;
+    let fleet = crate::fleet::fleet_id(args.fleet, credentials.as_deref())?;
     let models = tokio::task::spawn_blocking({
         let config = config.clone();
         move || daemon::load_models(&config)
@@ -188,19 +188,6 @@ async fn run(args: Args) -> Result<()> {
     let (tx, rx) = watch::channel(false);
     spawn_signal_handler(tx);
     daemon::run(Options { robot, fleet, config, zenoh, record: args.record, credentials }, models, rx, None).await
-}
-
-/// The fleet to join: the fleet directory's, which `--fleet` may repeat but not
-/// contradict; `default` for an open fleet without `--fleet`.
-pub fn fleet_of(given: Option<FleetId>, credentials: Option<&crate::fleet::Credentials>) -> Result<FleetId> {
-    match (given, credentials) {
-        (Some(f), Some(c)) if f != c.roster.fleet => {
-            anyhow::bail!("--fleet {f}, but the fleet directory is for fleet {}", c.roster.fleet)
-        }
-        (_, Some(c)) => Ok(c.roster.fleet.clone()),
-        (Some(f), None) => Ok(f),
-        (None, None) => Ok(FleetId::new("default").expect("a valid id")),
-    }
 }
 
 fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {

@@ -233,7 +233,7 @@ pub async fn run(
         }
         let mut decided = Vec::new();
         for mut o in outputs {
-            if let Some(s) = &signed_votes {
+            if let Some(s) = signed_votes.as_mut() {
                 s.sign(&mut o);
             }
             let out = match &o {

@@ -14,8 +14,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::Serialize;
 use spwi_agent::cli::init_tracing;
 use spwi_agent::config::LogFormat;
-use spwi_agent::fleet::authority::{self, Validity};
-use spwi_agent::fleet::{secure, Credentials, FleetDir, Role};
+use spwi_agent::fleet::authority::ThrowawayFleet;
+use spwi_agent::fleet::{secure_or_warn, Role};
 use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
@@ -106,30 +106,6 @@ fn proc_usage(pid: u32) -> Option<(f64, f64)> {
     Some((ticks / 100.0, rss_kb / 1024.0)) // USER_HZ is 100 on Linux
 }
 
-/// A throw-away fleet directory for a secured bench: the world and every agent.
-struct SecuredBench {
-    dir: FleetDir,
-}
-
-impl SecuredBench {
-    fn make(fleet: &FleetId, robots: &[RobotId]) -> Result<SecuredBench> {
-        let dir = FleetDir::new(std::env::temp_dir().join(format!("spwi-bench-fleet-{}", std::process::id())));
-        let _ = std::fs::remove_dir_all(&dir.root);
-        authority::init(&dir, fleet, Validity::days(1))?;
-        authority::add(&dir, &RobotId::new("world")?, Role::World, Validity::days(1))?;
-        for r in robots {
-            authority::add(&dir, r, Role::Robot, Validity::days(1))?;
-        }
-        Ok(SecuredBench { dir })
-    }
-}
-
-impl Drop for SecuredBench {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.dir.root);
-    }
-}
-
 struct Agents(Vec<Child>);
 
 impl Drop for Agents {
@@ -147,11 +123,18 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     }
     let fleet = FleetId::new(format!("bench{}", std::process::id()))?;
     let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
-    let secured = if o.secured { Some(SecuredBench::make(&fleet, &ids)?) } else { None };
+    // A secured bench: a throw-away fleet of the world and every agent.
+    let secured = if o.secured {
+        let members: Vec<(&str, Role)> =
+            std::iter::once(("world", Role::World)).chain(ids.iter().map(|r| (r.as_str(), Role::Robot))).collect();
+        Some(ThrowawayFleet::create("bench", &fleet, &members)?)
+    } else {
+        None
+    };
     // The world's session is the hub the agents connect to; gossip completes the mesh.
     let mut hub_config = zenoh_config::loopback_peer(&[])?;
     if let Some(s) = &secured {
-        secure::apply(&mut hub_config, &Credentials::load(&s.dir, "world")?)?;
+        secure_or_warn(&mut hub_config, Some(&s.dir.root), "world", Role::World, "spwi-sim bench")?;
     }
     let session = zenoh::open(hub_config).await.map_err(|e| anyhow!("zenoh: {e}"))?;
     let hub = session

@@ -162,7 +162,7 @@ pub fn main(a: WorldServiceArgs) -> Result<()> {
     let mut zenoh = spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?;
     let credentials =
         spwi_agent::fleet::secure_or_warn(&mut zenoh, fleet_dir.as_deref(), &identity, Role::World, "spwi-sim world")?;
-    let fleet = spwi_agent::cli::fleet_of(fleet, credentials.as_deref())?;
+    let fleet = spwi_agent::fleet::fleet_id(fleet, credentials.as_deref())?;
     let floor = world.floor()?;
     if let Some(s) = stuck_slot {
         if s >= floor.layout.robots.len() {

@@ -22,7 +22,6 @@ use spwi_tests::*;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use zenoh::Wait;
 
 const TICK: Duration = Duration::from_millis(100);
 
@@ -40,17 +39,18 @@ impl Dirs {
         let _ = std::fs::remove_dir_all(&root);
         let (fleet, other) = (FleetDir::new(root.join("fleet")), FleetDir::new(root.join("other")));
         let f = FleetId::new(format!("sec-{test}")).unwrap();
-        authority::init(&fleet, &f, Validity::days(30)).unwrap();
-        authority::add(&fleet, &id("world"), Role::World, Validity::days(30)).unwrap();
-        authority::add(&fleet, &id("router"), Role::Router, Validity::days(30)).unwrap();
-        for r in ["r1", "r2", "r3"] {
-            authority::add(&fleet, &id(r), Role::Robot, Validity::days(30)).unwrap();
-        }
+        let members = [
+            ("world", Role::World),
+            ("router", Role::Router),
+            ("r1", Role::Robot),
+            ("r2", Role::Robot),
+            ("r3", Role::Robot),
+        ];
+        authority::create(&fleet, &f, &members, Validity::days(30)).unwrap();
         let now = time::OffsetDateTime::now_utc();
         let expired = Validity { not_before: now - time::Duration::days(3), not_after: now - time::Duration::days(1) };
         authority::add(&fleet, &id("r4"), Role::Robot, expired).unwrap();
-        authority::init(&other, &f, Validity::days(30)).unwrap();
-        authority::add(&other, &id("r9"), Role::Robot, Validity::days(30)).unwrap();
+        authority::create(&other, &f, &[("r9", Role::Robot)], Validity::days(30)).unwrap();
         Dirs { root, fleet, other }
     }
 }
@@ -61,17 +61,27 @@ impl Drop for Dirs {
     }
 }
 
-/// Every key the hub receives under the fleet.
-fn watch_keys(hub: &Hub) -> (Arc<Mutex<Vec<String>>>, impl Sized) {
-    let seen = Arc::new(Mutex::new(Vec::new()));
-    let s = seen.clone();
-    let sub = hub
+/// The secured hub (the fleet's world) and what reaches it: every key under the
+/// fleet, every decision.
+struct Observed {
+    hub: Hub,
+    keys_seen: Arc<Mutex<Vec<String>>>,
+    collector: Collector,
+    _watch: zenoh::pubsub::Subscriber<()>,
+}
+
+async fn observe(dirs: &Dirs) -> Observed {
+    let hub = Hub::start_secured(&dirs.fleet.root, "world").await.unwrap();
+    let keys_seen = Arc::new(Mutex::new(Vec::new()));
+    let s = keys_seen.clone();
+    let _watch = hub
         .session
         .declare_subscriber(keys::everything(&hub.fleet))
         .callback(move |sample| s.lock().unwrap().push(sample.key_expr().as_str().to_owned()))
-        .wait()
+        .await
         .unwrap();
-    (seen, sub)
+    let collector = Collector::start(&hub).await.unwrap();
+    Observed { hub, keys_seen, collector, _watch }
 }
 
 /// A TLS peer of our own making (not through the fleet's checks): the CA to trust
@@ -181,10 +191,8 @@ async fn outsiders_get_no_link_and_are_never_counted() {
     let _serial = serial().await;
     within!(90, "the test", async {
         let dirs = Dirs::make("outsiders");
-        let hub = Hub::start_secured(&dirs.fleet.root, "world").await.unwrap();
+        let Observed { hub, keys_seen, collector, _watch } = observe(&dirs).await;
         assert!(hub.locator.starts_with("tls/"), "the hub listens on {}", hub.locator);
-        let (keys_seen, _watch) = watch_keys(&hub);
-        let collector = Collector::start(&hub).await.unwrap();
         let models = models();
         let members = vec![id("r1"), id("r2")];
         let mut agents = Vec::new();
@@ -250,9 +258,7 @@ async fn a_member_cannot_speak_for_another_robot() {
     let _serial = serial().await;
     within!(90, "the test", async {
         let dirs = Dirs::make("impostor");
-        let hub = Hub::start_secured(&dirs.fleet.root, "world").await.unwrap();
-        let (keys_seen, _watch) = watch_keys(&hub);
-        let collector = Collector::start(&hub).await.unwrap();
+        let Observed { hub, keys_seen, collector, _watch } = observe(&dirs).await;
         let models = models();
         let r1 = InProcessAgent::start(&hub, &id("r1"), &models, AgentConfig::default()).await;
         // A whole daemon calling itself r2 with r3's certificate, and r3's raw session
@@ -307,9 +313,7 @@ async fn a_revoked_robot_cannot_rejoin_with_its_old_files() {
         let e = Credentials::load(&dirs.fleet, "r2").unwrap_err().to_string();
         assert!(e.contains("r2 is revoked"), "{e}");
 
-        let hub = Hub::start_secured(&dirs.fleet.root, "world").await.unwrap();
-        let (keys_seen, _watch) = watch_keys(&hub);
-        let collector = Collector::start(&hub).await.unwrap();
+        let Observed { hub, keys_seen, collector, _watch } = observe(&dirs).await;
         let models = models();
         let r1 = InProcessAgent::start(&hub, &id("r1"), &models, AgentConfig::default()).await;
         let (zenoh, creds) = secured_peer(&stale, "r2", std::slice::from_ref(&hub.locator)).unwrap();

@@ -89,6 +89,37 @@ pub fn add(dir: &FleetDir, name: &RobotId, role: Role, validity: Validity) -> Re
     Ok(member)
 }
 
+/// A new fleet in `dir` with `members` admitted at once.
+pub fn create(dir: &FleetDir, fleet: &FleetId, members: &[(&str, Role)], validity: Validity) -> Result<()> {
+    init(dir, fleet, validity)?;
+    for (name, role) in members {
+        add(dir, &RobotId::new(*name)?, *role, validity)?;
+    }
+    Ok(())
+}
+
+/// A fleet in a fresh directory under the system's temporary one, removed when dropped:
+/// for a secured bench, and for tests.
+pub struct ThrowawayFleet {
+    pub dir: FleetDir,
+}
+
+impl ThrowawayFleet {
+    /// `label` keeps the directories of concurrent users apart (with the process id).
+    pub fn create(label: &str, fleet: &FleetId, members: &[(&str, Role)]) -> Result<ThrowawayFleet> {
+        let dir = FleetDir::new(std::env::temp_dir().join(format!("spwi-fleet-{label}-{}", std::process::id())));
+        let _ = std::fs::remove_dir_all(&dir.root);
+        create(&dir, fleet, members, Validity::days(1))?;
+        Ok(ThrowawayFleet { dir })
+    }
+}
+
+impl Drop for ThrowawayFleet {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir.root);
+    }
+}
+
 /// `fleet revoke`: marks `name` revoked in the roster. Every process given the new
 /// roster denies it everything from its next start; its files are left for the record.
 pub fn revoke(dir: &FleetDir, name: &str) -> Result<()> {

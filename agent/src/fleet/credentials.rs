@@ -118,28 +118,16 @@ fn load_key(path: &Path) -> Result<Ed25519KeyPair> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::authority::{add, init, revoke, Validity};
+    use super::super::authority::{add, init, revoke, ThrowawayFleet, Validity};
     use super::super::Role;
     use super::*;
     use spwi_proto::FleetId;
     use std::os::unix::fs::PermissionsExt;
 
     /// A fleet with robots r1 and r2 in a fresh directory, removed on drop.
-    struct Tmp(FleetDir);
-    impl Drop for Tmp {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0.root);
-        }
-    }
-    fn fleet(name: &str) -> Tmp {
-        let root = std::env::temp_dir().join(format!("spwi-creds-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&root);
-        let dir = FleetDir::new(root);
-        init(&dir, &FleetId::new("f").unwrap(), Validity::days(10)).unwrap();
-        for r in ["r1", "r2"] {
-            add(&dir, &RobotId::new(r).unwrap(), Role::Robot, Validity::days(10)).unwrap();
-        }
-        Tmp(dir)
+    fn fleet(name: &str) -> ThrowawayFleet {
+        let members = [("r1", Role::Robot), ("r2", Role::Robot)];
+        ThrowawayFleet::create(&format!("creds-{name}"), &FleetId::new("f").unwrap(), &members).unwrap()
     }
     fn err(dir: &FleetDir, who: &str) -> String {
         format!("{:#}", Credentials::load(dir, who).unwrap_err())
@@ -148,13 +136,14 @@ mod tests {
     #[test]
     fn a_member_loads_signs_and_is_verified_by_the_roster() {
         let t = fleet("ok");
-        let c = Credentials::load(&t.0, "r1").unwrap();
+        let c = Credentials::load(&t.dir, "r1").unwrap();
         assert_eq!(c.identity.role, Role::Robot);
         let sig = c.sign(b"tick 7");
         assert!(c.verify(&RobotId::new("r1").unwrap(), b"tick 7", &sig));
         assert!(!c.verify(&RobotId::new("r1").unwrap(), b"tick 8", &sig), "another message");
         assert!(!c.verify(&RobotId::new("r2").unwrap(), b"tick 7", &sig), "another signer");
-        for (file, mode) in [(t.0.ca_key(), 0o600), (t.0.member_key("r1"), 0o600), (t.0.member_cert("r1"), 0o644)] {
+        for (file, mode) in [(t.dir.ca_key(), 0o600), (t.dir.member_key("r1"), 0o600), (t.dir.member_cert("r1"), 0o644)]
+        {
             let m = std::fs::metadata(&file).unwrap().permissions().mode() & 0o777;
             assert_eq!(m, mode, "{}", file.display());
         }
@@ -164,7 +153,7 @@ mod tests {
     #[test]
     fn each_bad_file_is_named() {
         let t = fleet("bad");
-        let d = &t.0;
+        let d = &t.dir;
         assert!(err(d, "r7").contains("r7 is not a member"));
         // r1 presenting r2's key
         std::fs::copy(d.member_key("r2"), d.root.join("r2.key")).unwrap();
@@ -190,14 +179,14 @@ mod tests {
     #[test]
     fn a_certificate_of_another_ca_or_out_of_date_is_refused() {
         let (a, b) = (fleet("ca-a"), fleet("ca-b"));
-        std::fs::copy(b.0.member_cert("r1"), a.0.member_cert("r1")).unwrap();
-        assert!(err(&a.0, "r1").contains("not signed by the fleet's CA"), "{}", err(&a.0, "r1"));
+        std::fs::copy(b.dir.member_cert("r1"), a.dir.member_cert("r1")).unwrap();
+        assert!(err(&a.dir, "r1").contains("not signed by the fleet's CA"), "{}", err(&a.dir, "r1"));
         let now = time::OffsetDateTime::now_utc();
         let old = Validity { not_before: now - time::Duration::days(9), not_after: now - time::Duration::days(2) };
-        add(&a.0, &RobotId::new("r3").unwrap(), Role::Robot, old).unwrap();
-        let e = err(&a.0, "r3");
+        add(&a.dir, &RobotId::new("r3").unwrap(), Role::Robot, old).unwrap();
+        let e = err(&a.dir, "r3");
         assert!(e.contains("r3.crt: the certificate of r3 expired on"), "{e}");
-        assert!(init(&a.0, &FleetId::new("f").unwrap(), Validity::days(1))
+        assert!(init(&a.dir, &FleetId::new("f").unwrap(), Validity::days(1))
             .unwrap_err()
             .to_string()
             .contains("already holds"));

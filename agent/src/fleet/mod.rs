@@ -58,6 +58,22 @@ impl FleetDir {
     }
 }
 
+/// The fleet to join: the fleet directory's, which `--fleet` may repeat but not
+/// contradict; `default` for an open fleet without `--fleet`.
+pub fn fleet_id(
+    given: Option<spwi_proto::FleetId>,
+    credentials: Option<&Credentials>,
+) -> anyhow::Result<spwi_proto::FleetId> {
+    match (given, credentials) {
+        (Some(f), Some(c)) if f != c.roster.fleet => {
+            anyhow::bail!("--fleet {f}, but the fleet directory is for fleet {}", c.roster.fleet)
+        }
+        (_, Some(c)) => Ok(c.roster.fleet.clone()),
+        (Some(f), None) => Ok(f),
+        (None, None) => Ok(spwi_proto::FleetId::new("default").expect("a valid id")),
+    }
+}
+
 /// Secures `zenoh` for `identity` of the fleet in `dir`, which must be a member of
 /// `role` (the role decides what the others accept from it), or warns that the fleet
 /// is open. Returns the credentials (their roster names the fleet).
@@ -97,27 +113,23 @@ pub fn secure_or_warn(
 
 #[cfg(test)]
 mod tests {
-    use super::authority::{add, init, Validity};
+    use super::authority::ThrowawayFleet;
     use super::*;
-    use spwi_proto::{FleetId, RobotId};
+    use spwi_proto::FleetId;
 
     #[test]
     fn a_process_presents_a_member_of_its_own_role_of_its_own_fleet() {
-        let root = std::env::temp_dir().join(format!("spwi-fleet-role-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&root);
-        let dir = FleetDir::new(&root);
-        init(&dir, &FleetId::new("plant7").unwrap(), Validity::days(1)).unwrap();
-        add(&dir, &RobotId::new("world").unwrap(), Role::World, Validity::days(1)).unwrap();
-        add(&dir, &RobotId::new("r1").unwrap(), Role::Robot, Validity::days(1)).unwrap();
+        let members = [("world", Role::World), ("r1", Role::Robot)];
+        let fleet = ThrowawayFleet::create("role", &FleetId::new("plant7").unwrap(), &members).unwrap();
+        let root = &fleet.dir.root;
         let mut z = zenoh::Config::default();
-        let e = secure_or_warn(&mut z, Some(&root), "world", Role::Robot, "spwi-agent").unwrap_err().to_string();
+        let e = secure_or_warn(&mut z, Some(root), "world", Role::Robot, "spwi-agent").unwrap_err().to_string();
         assert!(e.contains("world is a world") && e.contains("a robot"), "{e}");
-        let creds = secure_or_warn(&mut z, Some(&root), "r1", Role::Robot, "spwi-agent").unwrap().unwrap();
+        let creds = secure_or_warn(&mut z, Some(root), "r1", Role::Robot, "spwi-agent").unwrap().unwrap();
         assert_eq!(z.get_json("transport/link/protocols").unwrap(), r#"["tls"]"#);
-        assert_eq!(crate::cli::fleet_of(None, Some(&creds)).unwrap().as_str(), "plant7");
-        let e = crate::cli::fleet_of(Some(FleetId::new("other").unwrap()), Some(&creds)).unwrap_err().to_string();
+        assert_eq!(fleet_id(None, Some(&creds)).unwrap().as_str(), "plant7");
+        let e = fleet_id(Some(FleetId::new("other").unwrap()), Some(&creds)).unwrap_err().to_string();
         assert!(e.contains("--fleet other, but the fleet directory is for fleet plant7"), "{e}");
         assert!(secure_or_warn(&mut zenoh::Config::default(), None, "r1", Role::Robot, "x").unwrap().is_none());
-        std::fs::remove_dir_all(&root).unwrap();
     }
 }

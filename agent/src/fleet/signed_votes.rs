@@ -27,31 +27,43 @@ pub struct SignedVotes {
     robot: RobotId,
     /// Votes known authentic, as signed bytes, by tick and origin.
     known: BTreeMap<u64, HashMap<RobotId, Vec<u8>>>,
+    /// Our latest vote's signed bytes and signature: the vote goes out, then again in
+    /// our relay of the tick, and is signed once.
+    own: Option<(Vec<u8>, Vec<u8>)>,
 }
 
 impl SignedVotes {
     pub fn new(creds: Arc<Credentials>, robot: RobotId) -> SignedVotes {
-        SignedVotes { creds, robot, known: BTreeMap::new() }
+        SignedVotes { creds, robot, known: BTreeMap::new(), own: None }
     }
 
     /// Signs this robot's own votes in an output (its vote, and its vote among the
     /// ballots it relays).
-    pub fn sign(&self, out: &mut Output) {
+    pub fn sign(&mut self, out: &mut Output) {
         let own = match out {
             Output::Vote(v) => std::slice::from_mut(v),
             Output::Ballots(b) => b.votes.as_mut_slice(),
             _ => return,
         };
         for v in own.iter_mut().filter(|v| v.robot == self.robot && v.signature.is_empty()) {
-            v.signature = self.creds.sign(&v.signed_bytes()).to_vec();
+            let bytes = v.signed_bytes();
+            v.signature = match &self.own {
+                Some((signed, signature)) if *signed == bytes => signature.clone(),
+                _ => {
+                    let signature = self.creds.sign(&bytes).to_vec();
+                    self.own = Some((bytes, signature.clone()));
+                    signature
+                }
+            };
         }
     }
 
-    /// Remembers votes heard directly; drops relayed votes whose origin's signature does
-    /// not verify. Returns how many were dropped.
+    /// Remembers peers' votes heard directly; drops relayed votes whose origin's
+    /// signature does not verify. Returns how many were dropped. Our own vote, heard
+    /// back or relayed back, is neither kept nor checked: the engine ignores it.
     pub fn check(&mut self, input: &mut Input) -> usize {
         match input {
-            Input::Vote(v) => {
+            Input::Vote(v) if v.robot != self.robot => {
                 let bytes = v.signed_bytes();
                 self.remember(v, bytes);
                 0
@@ -59,7 +71,7 @@ impl SignedVotes {
             Input::Ballots(b) => {
                 let before = b.votes.len();
                 let relayer = b.robot.clone();
-                b.votes.retain(|v| v.robot == relayer || self.authentic(v));
+                b.votes.retain(|v| v.robot == relayer || v.robot == self.robot || self.authentic(v));
                 before - b.votes.len()
             }
             _ => 0,
@@ -89,8 +101,8 @@ impl SignedVotes {
 
 #[cfg(test)]
 mod tests {
-    use super::super::authority::{add, init, Validity};
-    use super::super::{FleetDir, Role};
+    use super::super::authority::ThrowawayFleet;
+    use super::super::Role;
     use super::*;
     use spwi_proto::{BallotsMsg, FleetId, StepVote};
 
@@ -113,23 +125,18 @@ mod tests {
 
     #[test]
     fn a_relayed_vote_counts_only_with_its_origins_signature() {
-        let root = std::env::temp_dir().join(format!("spwi-signed-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&root);
-        let dir = FleetDir::new(&root);
-        init(&dir, &FleetId::new("f").unwrap(), Validity::days(1)).unwrap();
-        for r in ["a", "b", "c"] {
-            add(&dir, &id(r), Role::Robot, Validity::days(1)).unwrap();
-        }
-        let creds = |r: &str| Arc::new(Credentials::load(&dir, r).unwrap());
-        let (a, b) = (SignedVotes::new(creds("a"), id("a")), SignedVotes::new(creds("b"), id("b")));
+        let members = [("a", Role::Robot), ("b", Role::Robot), ("c", Role::Robot)];
+        let fleet = ThrowawayFleet::create("signed", &FleetId::new("f").unwrap(), &members).unwrap();
+        let creds = |r: &str| Arc::new(Credentials::load(&fleet.dir, r).unwrap());
+        let (mut a, mut b) = (SignedVotes::new(creds("a"), id("a")), SignedVotes::new(creds("b"), id("b")));
         let c = || SignedVotes::new(creds("c"), id("c"));
-        let signed = |s: &SignedVotes, v: VoteMsg| {
+        let signed = |s: &mut SignedVotes, v: VoteMsg| {
             let mut out = Output::Vote(v);
             s.sign(&mut out);
             let Output::Vote(v) = out else { unreachable!() };
             v
         };
-        let from_a = signed(&a, vote("a", 5, 0.9));
+        let from_a = signed(&mut a, vote("a", 5, 0.9));
         assert_eq!(from_a.signature.len(), 64);
         let mut again =
             Output::Ballots(BallotsMsg { robot: id("a"), instance: 1, tick: 5, votes: vec![vote("a", 5, 0.9)] });
@@ -142,7 +149,7 @@ mod tests {
         let ballots = |votes| Input::Ballots(BallotsMsg { robot: id("b"), instance: 1, tick: 5, votes });
         let mut input = ballots(vec![from_a.clone(), vote("b", 5, 0.5)]);
         assert_eq!(c().check(&mut input), 0);
-        for bad in [forged.clone(), vote("a", 5, 0.9), signed(&b, vote("a", 5, 0.9))] {
+        for bad in [forged.clone(), vote("a", 5, 0.9), signed(&mut b, vote("a", 5, 0.9))] {
             let mut input = ballots(vec![bad, vote("b", 5, 0.5)]);
             assert_eq!(c().check(&mut input), 1, "a vote of a not signed by a must not count");
             let Input::Ballots(kept) = input else { unreachable!() };
@@ -154,6 +161,5 @@ mod tests {
         assert_eq!(c.check(&mut Input::Vote(from_a.clone())), 0);
         assert_eq!(c.check(&mut ballots(vec![vote("a", 5, 0.9)])), 0, "the very vote heard directly");
         assert_eq!(c.check(&mut ballots(vec![forged])), 1);
-        std::fs::remove_dir_all(&root).unwrap();
     }
 }
