@@ -19,8 +19,10 @@ CLASSES = 4
 EMBEDDING = 128
 KEYPOINTS = 34
 FEATURE = 1024
-# agent/src/floor/relations.rs: RELATION_DIM (track 3 + 4 stations x 6)
-RELATIONS = 27
+# agent/src/floor/relations.rs: RELATION_DIM (TRACK_VALUES + 4 stations x PER_STATION)
+TRACK_VALUES = 3
+PER_STATION = 6
+RELATIONS = TRACK_VALUES + CLASSES * PER_STATION
 SPLITS = {"train": 0, "validation": 1, "test": 2}
 
 

@@ -6,11 +6,14 @@
   final hidden state -> logits for t and each of the next H ticks.
 - Cnn1dGRU (the paper's 1D-CNN baseline): five 1-D convolutions over the worker node's
   1024-d feature of each frame -> 128, concatenated with the keypoints, then the same GRU.
+- StationScorer (relation rows): one small network, shared by every station, scores
+  each station from the history of its own relation to the worker; a set summary of
+  all stations' states (mean and max, DeepSets) lets each score see the others.
 """
 import torch
 from torch import nn
 
-from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS
+from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, PER_STATION, TRACK_VALUES
 
 
 class GCN(nn.Module):
@@ -61,3 +64,50 @@ class Cnn1dGRU(nn.Module):
         z = self.conv(feature.reshape(b * f, 1, FEATURE)).reshape(b * f, -1)
         z = torch.relu(self.proj(z)).reshape(b, f, EMBEDDING)
         return self.temporal(torch.cat([z, keypoints], -1))
+
+
+class StationScorer(nn.Module):
+    """Reads relation rows (keypoints ‖ track values ‖ per station, in class order,
+    agent/src/floor/relations.rs) and gives logits [B, H+1, 4] like TemporalGRU.
+
+    Every station goes through the same GRU and head, so a station's score depends on
+    its relation to the worker, never on which class slot it sits in: what is learned
+    about one station holds for all, on any floor. The GRU also reads, per station, the
+    constant-velocity model's cost (how far the station lies off the line the worker
+    walks, or its distance when the worker stands or it lies behind) and the time to
+    reach it at the current closing speed, and shares the track values and a small
+    projection of the keypoints. Mean and max over the stations' final states (a set
+    summary, the same whatever the order) go into every station's head, so a station can
+    win because all the others are being left behind — also one nobody has mapped.
+    """
+
+    def __init__(self, horizon, hidden=64, pose=16, dropout=0.1):
+        super().__init__()
+        self.steps = horizon + 1
+        self.pose = nn.Linear(KEYPOINTS, pose)
+        self.gru = nn.GRU(PER_STATION + 2 + TRACK_VALUES + pose, hidden, batch_first=True)
+        # The head's first layer over [own state ‖ set summary], as two linear maps
+        # added with broadcasting (no Expand/Concat feeding a MatMul, which tract 0.23
+        # fails to optimise).
+        self.head_own = nn.Linear(hidden, hidden)
+        self.head_set = nn.Linear(2 * hidden, hidden, bias=False)
+        self.drop = nn.Dropout(dropout)
+        self.out = nn.Linear(hidden, self.steps)
+
+    def forward(self, x):
+        b, f, _ = x.shape
+        keypoints, track = x[..., :KEYPOINTS], x[..., KEYPOINTS : KEYPOINTS + TRACK_VALUES]
+        shared = torch.cat([track, torch.relu(self.pose(keypoints))], -1)
+        stations = []
+        for k in range(CLASSES):
+            st = x[..., KEYPOINTS + TRACK_VALUES + k * PER_STATION : KEYPOINTS + TRACK_VALUES + (k + 1) * PER_STATION]
+            known, dist, closing, cos, sin = st[..., 0:1], st[..., 1:2], st[..., 2:3], st[..., 4:5], st[..., 5:6]
+            off_line = known * torch.where(cos > 0, dist * sin.abs(), dist)
+            eta = torch.where(closing > 0.1, dist * 10 / closing.clamp(min=0.1), torch.full_like(dist, 30.0)) / 30
+            stations.append(torch.cat([st, off_line, known * eta.clamp(max=1.0), shared], -1))
+        rows = torch.stack(stations, 1).reshape(b * CLASSES, f, -1)  # station-major
+        _, h = self.gru(rows)
+        h = h[-1].reshape(b, CLASSES, -1)
+        summary = torch.cat([h.mean(1), h.max(1).values], -1)
+        z = torch.relu(self.head_own(h) + self.head_set(summary)[:, None, :])
+        return self.out(self.drop(z)).transpose(1, 2)

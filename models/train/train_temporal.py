@@ -21,9 +21,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, RELATIONS, Export, Sequences, batch
+from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, Export, Sequences, batch
 from export import OPSET, export, io_spec
-from nets import Cnn1dGRU, TemporalGRU
+from nets import Cnn1dGRU, StationScorer, TemporalGRU
 
 DIMS = {"ego": EMBEDDING + KEYPOINTS, "collective": 2 * EMBEDDING + KEYPOINTS, "cnn1d": FEATURE + KEYPOINTS}
 FILES = {"ego": "ego_gru", "collective": "collective_gru", "cnn1d": "cnn1d"}
@@ -80,8 +80,12 @@ def ece(logits, labels, temperature=1.0, bins=15):
 
 
 def train(kind, all_seqs, a, rng):
-    dim = KEYPOINTS + RELATIONS if a.relations and kind != "cnn1d" else DIMS[kind]
-    model = Cnn1dGRU(a.horizon) if kind == "cnn1d" else TemporalGRU(dim, a.horizon)
+    if kind == "cnn1d":
+        model = Cnn1dGRU(a.horizon)
+    elif a.relations:
+        model = StationScorer(a.horizon)
+    else:
+        model = TemporalGRU(DIMS[kind], a.horizon)
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3, weight_decay=1e-4)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, a.epochs)
     train_ends = [s.ends("train", every=a.every, tracked=a.relations and kind != "cnn1d") for s in all_seqs]

@@ -12,6 +12,8 @@ pub const FEATURE_DIM: usize = 512;
 pub const KEYPOINT_VALUES: usize = 34;
 /// Length of the GCN's human-node embedding that robots share.
 pub const EMBEDDING_DIM: usize = 128;
+/// The period of a tick: every frame, vote and decision belongs to one (10 Hz).
+pub const TICK_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
 /// Stations: 0 storage, 1 workstation, 2 assembly, 3 manufacturing.
 pub const NUM_CLASSES: usize = 4;
 /// Most object detections one frame may carry.

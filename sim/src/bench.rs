@@ -255,7 +255,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
                 tokio::time::sleep(Duration::from_micros(200)).await;
             }
         } else {
-            next += Duration::from_millis(100);
+            next += spwi_proto::TICK_PERIOD;
             tokio::time::sleep_until(tokio::time::Instant::from_std(next)).await;
         }
     }

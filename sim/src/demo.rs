@@ -131,11 +131,51 @@ struct PageTrack {
     sigma: f32,
 }
 
-#[derive(Serialize)]
+/// A robot's latest vote as the live views show it.
+#[derive(Serialize, Debug, PartialEq)]
 struct PageVote {
     class: u8,
     confidence: f32,
     visibility: u32,
+    /// Ticks between this vote and the tick the team last decided: 0 is a ballot of
+    /// this tick; more means the robot did not vote this tick and this is its last.
+    age_ticks: u64,
+}
+
+/// Votes older than this (ticks) are not shown at all.
+const SHOWN_VOTE_AGE: u64 = 50;
+
+/// `robot`'s last vote as seen at `current` (the tick the team last decided), or `None`
+/// when it has not voted for [`SHOWN_VOTE_AGE`] ticks.
+fn shown_vote(o: &Observed, robot: &RobotId, current: u64) -> Option<PageVote> {
+    let v = o.votes.get(robot).filter(|v| v.tick + SHOWN_VOTE_AGE >= current)?;
+    Some(PageVote {
+        class: v.steps[0].class,
+        confidence: v.steps[0].confidence,
+        visibility: v.visibility,
+        age_ticks: current.saturating_sub(v.tick),
+    })
+}
+
+/// The tick the team last decided (the views' "this tick"), or the last truth's.
+fn current_tick(o: &Observed) -> Option<u64> {
+    o.decisions.keys().next_back().or(o.last_truth.as_ref().map(|t| &t.tick)).copied()
+}
+
+/// The terminal's line for one robot.
+fn vote_line(robot: &RobotId, vote: Option<&PageVote>) -> String {
+    let name = |c: u8| STATION_NAMES.get(c as usize).copied().unwrap_or("?");
+    match vote {
+        Some(v) if v.age_ticks == 0 => {
+            format!("   {robot:<10} votes {:<14} conf {:.2}  sees {}", name(v.class), v.confidence, v.visibility)
+        }
+        Some(v) => format!(
+            "   {robot:<10} no vote this tick (last: {}, {:.1} s ago)",
+            name(v.class),
+            v.age_ticks as f64 * TICK_PERIOD.as_secs_f64()
+        ),
+        None => format!("   {robot:<10} no vote"),
+    }
 }
 
 #[derive(Serialize, Clone)]
@@ -153,6 +193,7 @@ fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoi
         .and_then(|(_, by)| by.values().next())
         .map(|(d, _)| d.steps.iter().map(|s| s.class).collect());
     let fresh = o.estimates.values().filter(|(tick, _)| tick + 2 >= t.tick).map(|(_, e)| e);
+    let current = current_tick(o).unwrap_or(t.tick);
     let team_track = floor::fuse(fresh).map(|e| PageTrack {
         position: e.position,
         velocity: e.velocity,
@@ -174,11 +215,7 @@ fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoi
                 robot: r.robot.clone(),
                 position: r.position,
                 heading: r.heading,
-                vote: o.votes.get(&r.robot).filter(|v| v.tick + 10 >= t.tick).map(|v| PageVote {
-                    class: v.steps[0].class,
-                    confidence: v.steps[0].confidence,
-                    visibility: v.visibility,
-                }),
+                vote: shown_vote(o, &r.robot, current),
             })
             .collect(),
         decision,
@@ -245,16 +282,9 @@ fn view(o: &Observed, elapsed: Duration, members: &[RobotId], summary: &Summary)
     let Some((&tick, &(truth, _))) = o.truth.iter().next_back() else { return };
     let name = |c: u8| STATION_NAMES.get(c as usize).copied().unwrap_or("?");
     println!("── t = {:>5.1} s  tick {tick}  members {}", elapsed.as_secs_f64(), members.len());
+    let current = current_tick(o).unwrap_or(tick);
     for r in members {
-        match o.votes.get(r) {
-            Some(v) => println!(
-                "   {r:<10} votes {:<14} conf {:.2}  sees {}",
-                name(v.steps[0].class),
-                v.steps[0].confidence,
-                v.visibility
-            ),
-            None => println!("   {r:<10} (no vote yet)"),
-        }
+        println!("{}", vote_line(r, shown_vote(o, r, current).as_ref()));
     }
     let decided = o.decisions.iter().rev().find_map(|(t, by)| by.values().next().map(|(d, _)| (*t, d.clone())));
     if let Some((t, d)) = decided {
@@ -363,7 +393,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
             seed: opts.seed,
             layout: opts.layout.clone(),
             zenoh: peer()?,
-            tick: Duration::from_millis(100),
+            tick: TICK_PERIOD,
             stuck_slot: None,
         },
         world_rx,
@@ -530,6 +560,46 @@ mod tests {
         assert_eq!(parse_duration("3"), Ok(Duration::from_secs(3)));
         assert!(parse_duration("soon").is_err());
         assert!(parse_duration("5h").is_err());
+    }
+
+    #[test]
+    fn a_robot_that_did_not_vote_this_tick_is_shown_with_its_last_vote_and_its_age() {
+        let (fresh, quiet, gone) =
+            (RobotId::new("r1").unwrap(), RobotId::new("r2").unwrap(), RobotId::new("r3").unwrap());
+        let vote = |robot: &RobotId, tick: u64, class: u8| VoteMsg {
+            robot: robot.clone(),
+            instance: 1,
+            tick,
+            steps: vec![StepVote { class, confidence: 0.8 }],
+            visibility: 2,
+            trust: 1.0,
+            quality: 1.0,
+            signature: Vec::new(),
+        };
+        let mut o = Observed::default();
+        for v in [vote(&fresh, 100, 2), vote(&quiet, 93, 1), vote(&gone, 100 - SHOWN_VOTE_AGE - 1, 0)] {
+            o.votes.insert(v.robot.clone(), v);
+        }
+        let decision = DecisionMsg {
+            robot: fresh.clone(),
+            instance: 1,
+            tick: 100,
+            steps: vec![TeamStep { class: 2, score: 1.0 }],
+            voters: vec![fresh.clone()],
+            live_members: 3,
+            decided_by: DecidedBy::AllVoted,
+            digest: 0,
+        };
+        o.decisions.entry(100).or_default().insert(fresh.clone(), (decision, Instant::now()));
+        let now = current_tick(&o).unwrap();
+        assert_eq!(now, 100);
+        assert_eq!(shown_vote(&o, &fresh, now).map(|v| v.age_ticks), Some(0));
+        assert_eq!(shown_vote(&o, &quiet, now).map(|v| v.age_ticks), Some(7));
+        assert_eq!(shown_vote(&o, &gone, now), None, "too old to show");
+        assert!(vote_line(&fresh, shown_vote(&o, &fresh, now).as_ref()).contains("votes assembly"));
+        let line = vote_line(&quiet, shown_vote(&o, &quiet, now).as_ref());
+        assert!(line.contains("no vote this tick (last: workstation, 0.7 s ago)"), "{line}");
+        assert!(vote_line(&gone, None).ends_with("no vote"));
     }
 
     #[test]

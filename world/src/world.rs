@@ -18,8 +18,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use spwi_proto::*;
 
-/// Seconds per tick (10 Hz).
-pub const DT: f32 = 0.1;
+/// Seconds per tick.
+pub const DT: f32 = spwi_proto::TICK_PERIOD.as_secs_f32();
 /// Robot patrol speed, m/s.
 const ROBOT_SPEED: f32 = 0.5;
 /// How fast a camera pans, radians per tick (≈ 115 °/s: a pan-tilt unit, not a head).

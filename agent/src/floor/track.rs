@@ -9,7 +9,7 @@
 use spwi_proto::WorkerEstimate;
 
 /// Seconds per tick.
-pub const TICK_S: f32 = 0.1;
+pub const TICK_S: f32 = spwi_proto::TICK_PERIOD.as_secs_f32();
 /// A gap longer than this (2 s) restarts the track.
 pub const MAX_GAP_TICKS: u64 = 20;
 /// An estimate is shared while the last measurement is at most this old (1 s).

@@ -173,7 +173,7 @@ mod tests {
         let mut bus = Bus::new(vec![engine(0, &models), engine(1, &models)], net, stream(7, Stream::Fault(1)), true);
         let mut world = World::new(Layout::default_layout(), Scenario::Dynamic, 7, 2);
         let ids: Vec<RobotId> = (0..2).map(|s| bus.engine(s).config().robot.clone()).collect();
-        let tick = Duration::from_millis(100);
+        let tick = spwi_proto::TICK_PERIOD;
         let mut decisions = [0, 0];
         for _ in 0..80 {
             world.step();

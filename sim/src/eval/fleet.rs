@@ -19,8 +19,8 @@ use spwi_world::layout::Layout;
 use spwi_world::world::{stream, Stream, World};
 use std::time::Duration;
 
-/// The tick period: the world's 10 Hz, as the daemon lives it.
-const TICK: Duration = Duration::from_millis(100);
+/// The tick period, as the daemon lives it.
+const TICK: Duration = spwi_proto::TICK_PERIOD;
 
 /// Tallies of one or more episodes.
 #[derive(Debug, Clone, Default)]
@@ -35,6 +35,11 @@ pub struct Tallies {
     /// counting as wrong: what the fleet as a whole gets right.
     pub team_all_ticks: Tally,
     pub cvm: Tally,
+    /// The constant-velocity model on the stations the robot's team mapped.
+    pub cvm_mapped: Tally,
+    /// The collective GRU on the ticks where the goal at t is missing from the robot's
+    /// team map (no relation row describes it).
+    pub collective_goal_unmapped: Tally,
     pub cnn1d: Tally,
     /// The same, on the ticks where the worker heads to a station of a close pair.
     pub close_pair: ClosePair,
@@ -67,6 +72,8 @@ impl Tallies {
             (&mut self.consensus, &o.consensus),
             (&mut self.team_all_ticks, &o.team_all_ticks),
             (&mut self.cvm, &o.cvm),
+            (&mut self.cvm_mapped, &o.cvm_mapped),
+            (&mut self.collective_goal_unmapped, &o.collective_goal_unmapped),
             (&mut self.cnn1d, &o.cnn1d),
             (&mut self.close_pair.ego, &o.close_pair.ego),
             (&mut self.close_pair.collective, &o.close_pair.collective),
@@ -270,11 +277,17 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                 if close {
                     tallies.close_pair.collective.add(c, truth);
                 }
+                if !p.mapped[truth[0] as usize] {
+                    tallies.collective_goal_unmapped.add(c, truth);
+                }
                 pr[2].add(c, truth);
                 confuse(&mut tallies.confusion_collective, c[0], truth[0]);
             }
             if let Some(c) = &p.cnn1d {
                 tallies.cnn1d.add(c, truth);
+            }
+            if let Some(c) = &p.cvm_mapped {
+                tallies.cvm_mapped.add(c, truth);
             }
             if let Some(c) = &p.cvm {
                 tallies.cvm.add(c, truth);

@@ -141,6 +141,8 @@ pub struct Report {
     pub confusion: BTreeMap<&'static str, Confusion>,
     /// Predictions at t scored for the collective GRU (robot-ticks seeing the worker).
     pub samples: u64,
+    /// Share of those on which the goal at t was missing from the robot's team map.
+    pub goal_unmapped_share: f64,
     pub seconds: f64,
     /// Wall time per robot frame (world, all models, consensus), microseconds.
     pub per_frame_us: f64,
@@ -201,6 +203,8 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     models.insert("consensus", of(&|e| &e.consensus));
     models.insert("team_all_ticks", of(&|e| &e.team_all_ticks));
     models.insert("cvm", of(&|e| &e.cvm));
+    models.insert("cvm_mapped", of(&|e| &e.cvm_mapped));
+    models.insert("collective_goal_unmapped", of(&|e| &e.collective_goal_unmapped));
     if m.models.cnn1d.is_some() {
         models.insert("cnn1d", of(&|e| &e.cnn1d));
     }
@@ -242,6 +246,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         bytes_per_robot_tick: all.bytes as f64 / all.frames.max(1) as f64,
         confusion: BTreeMap::from([("ego", all.confusion_ego), ("collective", all.confusion_collective)]),
         samples: all.collective.samples(),
+        goal_unmapped_share: all.collective_goal_unmapped.samples() as f64 / all.collective.samples().max(1) as f64,
         seconds,
         per_frame_us: seconds * 1e6 / all.frames.max(1) as f64,
     })
@@ -335,11 +340,22 @@ pub fn print(r: &Report) {
         _ => "–".into(),
     };
     println!("  {:<15} {:>21} {:>21}   (95 % CI by episode)", "model", "at t %", "t+1..H %");
-    for name in ["team_all_ticks", "gnn", "ego", "collective", "consensus", "cvm", "cnn1d"] {
+    for name in [
+        "team_all_ticks",
+        "gnn",
+        "ego",
+        "collective",
+        "consensus",
+        "cvm",
+        "cvm_mapped",
+        "cnn1d",
+        "collective_goal_unmapped",
+    ] {
         if let Some(a) = r.models.get(name) {
             println!("  {:<15} {:>21} {:>21}", name, ci(a), ci_future(a));
         }
     }
+    println!("  goal at t missing from the team's map on {} of the collective's ticks", pct(r.goal_unmapped_share));
     if !r.close_pair.is_empty() {
         println!("  heading to a station of a close pair:");
         for (name, a) in &r.close_pair {

@@ -26,7 +26,12 @@ pub struct Predictions {
     /// The engine's vote (its collective GRU).
     pub collective: Option<Vec<u8>>,
     pub cnn1d: Option<Vec<u8>>,
+    /// The constant-velocity model given the true work spots.
     pub cvm: Option<Vec<u8>>,
+    /// The same model given only the stations the team mapped (what our models get).
+    pub cvm_mapped: Option<Vec<u8>>,
+    /// Which stations the robot's team map held at this tick.
+    pub mapped: [bool; NUM_CLASSES],
 }
 
 pub struct Observers {
@@ -59,7 +64,7 @@ impl Observers {
             ego_rows: Window::with_frames(m.window, m.frames(), m.row),
             cnn1d: m.models.cnn1d.is_some().then(|| models.runner("cnn1d")).transpose()?,
             cnn_rows: BTreeMap::new(),
-            cvm: Cvm::new(0.1),
+            cvm: Cvm::new(spwi_proto::TICK_PERIOD.as_secs_f32()),
             camera,
             row_layout: m.row,
             keypoints: None,
@@ -129,6 +134,13 @@ impl Observers {
             out.cnn1d = Some(classes(&logits));
         }
         out.cvm = self.cvm.predict(station_spots).map(|k| vec![k as u8; self.horizon + 1]);
+        let team: Vec<(u8, [f32; 2])> =
+            (0..NUM_CLASSES as u8).filter_map(|k| floor_view.team_map.station(k).map(|at| (k, at))).collect();
+        let spots: Vec<[f32; 2]> = team.iter().map(|&(_, at)| at).collect();
+        out.cvm_mapped = self.cvm.predict(&spots).map(|i| vec![team[i].0; self.horizon + 1]);
+        for &(k, _) in &team {
+            out.mapped[k as usize] = true;
+        }
         Ok(out)
     }
 }

@@ -301,7 +301,8 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             ("gnn", "GNN", "70.73"),
             ("ego", "Ego-GRU", "77.7"),
             ("collective", "Collective-GRU", "88.87"),
-            ("cvm", "CVM (constant velocity, Kalman)", "66.1"),
+            ("cvm", "CVM (constant velocity, Kalman), true work spots", "66.1"),
+            ("cvm_mapped", "CVM on the stations the team mapped", "–"),
             ("cnn1d", "1D-CNN + GRU", "63.31"),
             ("consensus", "Collective-GRU + consensus", "88.5"),
             ("team_all_ticks", "Team, all ticks", "–"),
@@ -430,7 +431,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             let _ = write!(w, " {} |", r.floors);
         }
         let _ = writeln!(w, "\n|---|{}", "---|".repeat(st.generalisation.len()));
-        for name in ["team_all_ticks", "gnn", "ego", "collective", "consensus", "cvm", "cnn1d"] {
+        for name in ["team_all_ticks", "gnn", "ego", "collective", "consensus", "cvm", "cvm_mapped", "cnn1d"] {
             let _ = write!(w, "| {name} |");
             for r in &st.generalisation {
                 let _ = write!(w, " {} |", acc(r, name).0);
@@ -450,13 +451,13 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         );
         let _ = writeln!(
             w,
-            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `default`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `agent/src/floor/`), and votes from the track while it is fresh. CVM is given the true work spots; our models map the stations themselves. *Close pair*: ticks heading to a station of a close pair.\n"
+            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `default`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `agent/src/floor/`), and votes from the track while it is fresh. CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
         );
         let _ = writeln!(
             w,
-            "| set | cameras | robots | team, all ticks | coverage | ego t | collective t | collective − ego | consensus t | CVM t | close pair, collective t | agreement |"
+            "| set | cameras | robots | team, all ticks | coverage | ego t | collective t | collective − ego | consensus t | CVM t | CVM, mapped t | goal unmapped | close pair, collective t | agreement |"
         );
-        let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for r in &st.designs {
             let gap = match (r.models.get("collective"), r.models.get("ego")) {
                 (Some(c), Some(e)) => format!("{:+.1}", 100.0 * (c.t - e.t)),
@@ -465,7 +466,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             let cameras = r.floors.rsplit(", ").next().unwrap_or("");
             let _ = writeln!(
                 w,
-                "| {} | {cameras} | {} | {} | {} | {} | {} | {gap} | {} | {} | {} | {} |",
+                "| {} | {cameras} | {} | {} | {} | {} | {} | {gap} | {} | {} | {} | {} | {} | {} |",
                 r.model_set,
                 r.robots,
                 acc(r, "team_all_ticks").0,
@@ -474,6 +475,8 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 acc(r, "collective").0,
                 acc(r, "consensus").0,
                 acc(r, "cvm").0,
+                acc(r, "cvm_mapped").0,
+                pct(r.goal_unmapped_share),
                 acc_in(&r.close_pair, "collective").0,
                 pct(r.agreement)
             );
