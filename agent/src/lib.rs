@@ -5,9 +5,12 @@
 //!  detections ─► graph.rs ─► model/ (GCN) ─► embedding ──publish──► peers
 //!   (Zenoh)      star graph     │
 //!                               ▼
-//!        own ‖ mean(peer embeddings) ‖ keypoints ─► temporal.rs (window of W ticks)
+//!   floor/: worker track + station map, shared with the peers and fused
 //!                               ▼
-//!                       model/ (ego or collective GRU) ─► vote.rs ──publish──► peers
+//!   keypoints ‖ relations to the team's stations (default set), or
+//!   own ‖ mean(peer embeddings) ‖ keypoints (paper set) ─► temporal.rs (W ticks)
+//!                               ▼
+//!     model/ (ego or collective GRU: per-station scorer) ─► vote.rs ──publish──► peers
 //!                               ▼
 //!            consensus.rs over the votes of the live members ─► decision ──publish
 //!                 (ballots held are relayed partway through the tick;
@@ -21,7 +24,8 @@
 //! - [`trust`]: each voter's record of agreeing with the others, which weighs its votes;
 //! - [`floor`]: back-projection, the shared worker track and station map, relations;
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
-//! - [`daemon`]: Zenoh wiring, membership (liveliness), the event loop;
+//! - [`daemon`]: the event loop, its connection to the fleet (session, liveliness,
+//!   subscriptions) and its publisher thread;
 //! - [`config`], [`zenoh_config`], [`cli`]: settings and the command line;
 //! - [`fleet`]: who may join: certificates, roster, mutual TLS and access control;
 //! - [`router`]: `spwi-router`, the meeting point for hosts without multicast;

@@ -50,6 +50,44 @@ pub struct ConsensusDefaults {
     pub beta: f32,
 }
 
+/// The models a set can hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ModelKind {
+    Gcn,
+    EgoGru,
+    CollectiveGru,
+    /// The paper's 1D-CNN baseline (evaluation only).
+    Cnn1d,
+}
+
+impl ModelKind {
+    pub const ALL: [ModelKind; 4] = [ModelKind::Gcn, ModelKind::EgoGru, ModelKind::CollectiveGru, ModelKind::Cnn1d];
+
+    /// Its key under `models` in the manifest (and in `reference.json`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Gcn => "gcn",
+            ModelKind::EgoGru => "ego_gru",
+            ModelKind::CollectiveGru => "collective_gru",
+            ModelKind::Cnn1d => "cnn1d",
+        }
+    }
+
+    /// The GRU that reads `temporal`'s rows.
+    pub fn gru(temporal: TemporalModel) -> ModelKind {
+        match temporal {
+            TemporalModel::Ego => ModelKind::EgoGru,
+            TemporalModel::Collective => ModelKind::CollectiveGru,
+        }
+    }
+}
+
+impl std::fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Models {
     pub gcn: ModelSpec,
@@ -62,22 +100,19 @@ pub struct Models {
 }
 
 impl Models {
-    /// A model's spec by its manifest name.
-    pub fn by_name(&self, name: &str) -> Option<&ModelSpec> {
-        match name {
-            "gcn" => Some(&self.gcn),
-            "ego_gru" => Some(&self.ego_gru),
-            "collective_gru" => Some(&self.collective_gru),
-            "cnn1d" => self.cnn1d.as_ref(),
-            _ => None,
+    /// A model's spec; `None` for a baseline the set does not ship.
+    pub fn get(&self, kind: ModelKind) -> Option<&ModelSpec> {
+        match kind {
+            ModelKind::Gcn => Some(&self.gcn),
+            ModelKind::EgoGru => Some(&self.ego_gru),
+            ModelKind::CollectiveGru => Some(&self.collective_gru),
+            ModelKind::Cnn1d => self.cnn1d.as_ref(),
         }
     }
 
-    /// Every model the set holds, with its name.
-    pub fn all(&self) -> impl Iterator<Item = (&'static str, &ModelSpec)> {
-        [("gcn", &self.gcn), ("ego_gru", &self.ego_gru), ("collective_gru", &self.collective_gru)]
-            .into_iter()
-            .chain(self.cnn1d.as_ref().map(|s| ("cnn1d", s)))
+    /// Every model the set holds.
+    pub fn all(&self) -> impl Iterator<Item = (ModelKind, &ModelSpec)> {
+        ModelKind::ALL.into_iter().filter_map(|k| self.get(k).map(|s| (k, s)))
     }
 }
 
@@ -174,7 +209,7 @@ impl Manifest {
             return bad(format!("frames {} must be within 1..=window ({})", self.frames(), self.window));
         }
         let (n, w, steps) = (self.max_nodes, self.frames(), self.horizon + 1);
-        let expect = |spec: &ModelSpec, what: &str, inputs: &[&[usize]], outputs: &[&[usize]]| {
+        let expect = |spec: &ModelSpec, what: ModelKind, inputs: &[&[usize]], outputs: &[&[usize]]| {
             let ins: Vec<&[usize]> = spec.inputs.iter().map(|t| t.shape.as_slice()).collect();
             let outs: Vec<&[usize]> = spec.outputs.iter().map(|t| t.shape.as_slice()).collect();
             if ins != inputs || outs != outputs {
@@ -187,17 +222,21 @@ impl Manifest {
         };
         expect(
             &self.models.gcn,
-            "gcn",
+            ModelKind::Gcn,
             &[&[1, n, NODE_FEATURE_DIM], &[1, n, n]],
             &[&[1, EMBEDDING_DIM], &[1, NUM_CLASSES]],
         )?;
-        let (ego, collective) = (TemporalModel::Ego.row_dim(self.row), TemporalModel::Collective.row_dim(self.row));
-        expect(&self.models.ego_gru, "ego_gru", &[&[1, w, ego]], &[&[1, steps, NUM_CLASSES]])?;
-        expect(&self.models.collective_gru, "collective_gru", &[&[1, w, collective]], &[&[1, steps, NUM_CLASSES]])?;
-        if let Some(cnn) = &self.models.cnn1d {
-            expect(cnn, "cnn1d", &[&[1, w, CNN1D_DIM]], &[&[1, steps, NUM_CLASSES]])?;
+        for temporal in [TemporalModel::Ego, TemporalModel::Collective] {
+            let kind = ModelKind::gru(temporal);
+            let spec = self.models.get(kind).expect("every set has both GRUs");
+            expect(spec, kind, &[&[1, w, temporal.row_dim(self.row)]], &[&[1, steps, NUM_CLASSES]])?;
         }
-        for (what, spec) in [("ego_gru", &self.models.ego_gru), ("collective_gru", &self.models.collective_gru)] {
+        if let Some(cnn) = &self.models.cnn1d {
+            expect(cnn, ModelKind::Cnn1d, &[&[1, w, CNN1D_DIM]], &[&[1, steps, NUM_CLASSES]])?;
+        }
+        for (what, spec) in
+            [(ModelKind::EgoGru, &self.models.ego_gru), (ModelKind::CollectiveGru, &self.models.collective_gru)]
+        {
             match spec.temperature {
                 Some(t) if t.is_finite() && t > 0.0 => {}
                 other => return bad(format!("{what}.temperature is {other:?}; it must be a positive number")),

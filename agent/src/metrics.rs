@@ -3,6 +3,7 @@
 //! the hot path); the HTTP side reads a snapshot refreshed once per decision.
 
 use serde::Serialize;
+use spwi_proto::DecodeError;
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::time::Duration;
@@ -10,6 +11,50 @@ use std::time::Duration;
 /// Bucket upper bounds in seconds: 50 µs … 1 s.
 const BOUNDS: [f64; 14] =
     [50e-6, 100e-6, 200e-6, 500e-6, 1e-3, 2e-3, 5e-3, 10e-3, 20e-3, 50e-3, 100e-3, 200e-3, 500e-3, 1.0];
+
+/// Why a message never reached the engine: the codec refused it, its relayed vote
+/// was not signed by its origin, or the event queue was full.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DropReason {
+    TooLarge,
+    Version,
+    Malformed,
+    Trailing,
+    Invalid,
+    RobotMismatch,
+    ForgedRelayedVote,
+    QueueFull,
+}
+
+impl DropReason {
+    /// The `reason` label of `spwi_bad_messages_total`.
+    pub fn label(self) -> &'static str {
+        match self {
+            DropReason::TooLarge => "too_large",
+            DropReason::Version => "version",
+            DropReason::Malformed => "malformed",
+            DropReason::Trailing => "trailing",
+            DropReason::Invalid => "invalid",
+            DropReason::RobotMismatch => "robot_mismatch",
+            DropReason::ForgedRelayedVote => "forged_relayed_vote",
+            DropReason::QueueFull => "queue_full",
+        }
+    }
+}
+
+impl From<&DecodeError> for DropReason {
+    fn from(e: &DecodeError) -> Self {
+        match e {
+            DecodeError::TooLarge { .. } => DropReason::TooLarge,
+            DecodeError::UnknownVersion { .. } => DropReason::Version,
+            DecodeError::Malformed { .. } => DropReason::Malformed,
+            DecodeError::TrailingBytes { .. } => DropReason::Trailing,
+            DecodeError::Invalid { .. } => DropReason::Invalid,
+            DecodeError::RobotMismatch { .. } => DropReason::RobotMismatch,
+        }
+    }
+}
 
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Histogram {
@@ -95,8 +140,8 @@ pub struct Metrics {
     pub late_messages: u64,
     /// Frames for a tick already decided (duplicates, replays): dropped.
     pub stale_frames: u64,
-    /// Messages refused by the codec, by reason.
-    pub bad_messages: BTreeMap<&'static str, u64>,
+    /// Messages refused before the engine, by reason.
+    pub bad_messages: BTreeMap<DropReason, u64>,
     /// Messages from another live daemon using our robot id.
     pub duplicate_id_messages: u64,
     /// Open ticks dropped because too many were open.
@@ -128,8 +173,8 @@ impl Metrics {
         self.stages.entry(stage).or_default().observe(d);
     }
 
-    pub fn bad_message(&mut self, reason: &'static str) {
-        *self.bad_messages.entry(reason).or_default() += 1;
+    pub fn bad_messages(&mut self, reason: DropReason, n: u64) {
+        *self.bad_messages.entry(reason).or_default() += n;
     }
 
     pub fn bad_total(&self) -> u64 {
@@ -211,7 +256,7 @@ impl Metrics {
             "# HELP spwi_bad_messages_total messages refused, by reason\n# TYPE spwi_bad_messages_total counter"
         );
         for (reason, v) in &self.bad_messages {
-            let _ = writeln!(o, "spwi_bad_messages_total{{{l},reason=\"{reason}\"}} {v}");
+            let _ = writeln!(o, "spwi_bad_messages_total{{{l},reason=\"{}\"}} {v}", reason.label());
         }
         let _ = writeln!(o, "# HELP spwi_stage_seconds time per pipeline stage\n# TYPE spwi_stage_seconds histogram");
         for (stage, h) in &self.stages {
@@ -234,7 +279,7 @@ mod tests {
         let h = &m.stages[&Stage::Gcn];
         assert_eq!(h.quantile_upper_bound(0.5), Some(100e-6));
         assert_eq!(h.quantile_upper_bound(1.0), Some(1e-3));
-        m.bad_message("version");
+        m.bad_messages(DropReason::Version, 1);
         let text = m.render("r1", 3);
         assert!(text.contains("spwi_stage_seconds_bucket{robot=\"r1\",stage=\"gcn\",le=\"+Inf\"} 4"), "{text}");
         assert!(text.contains("spwi_bad_messages_total{robot=\"r1\",reason=\"version\"} 1"));

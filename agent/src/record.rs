@@ -24,7 +24,7 @@ use crate::model::ModelSet;
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use spwi_proto::{decode, encode, RobotId};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
@@ -75,25 +75,75 @@ struct MembershipRecord {
 /// Writes a run to an MCAP file.
 pub struct Recorder {
     writer: mcap::Writer<BufWriter<File>>,
-    channels: HashMap<&'static str, u16>,
+    /// MCAP channel id of each [`Channel`], by its index.
+    channels: [u16; Channel::ALL.len()],
     sequence: u32,
 }
 
-const TOPICS: [(&str, &str); 13] = [
-    ("/spwi/config", "json"),
-    ("/spwi/in/detections", BINCODE),
-    ("/spwi/in/embedding", BINCODE),
-    ("/spwi/in/vote", BINCODE),
-    ("/spwi/in/ballots", BINCODE),
-    ("/spwi/in/decision", BINCODE),
-    ("/spwi/in/membership", "json"),
-    ("/spwi/in/poll", BINCODE),
-    ("/spwi/out/embedding", BINCODE),
-    ("/spwi/out/vote", BINCODE),
-    ("/spwi/out/ballots", BINCODE),
-    ("/spwi/out/decision", BINCODE),
-    ("/spwi/state", "json"),
-];
+/// The channels of a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Channel {
+    Config,
+    InDetections,
+    InEmbedding,
+    InVote,
+    InBallots,
+    InDecision,
+    InMembership,
+    InPoll,
+    OutEmbedding,
+    OutVote,
+    OutBallots,
+    OutDecision,
+    State,
+}
+
+impl Channel {
+    const ALL: [Channel; 13] = [
+        Channel::Config,
+        Channel::InDetections,
+        Channel::InEmbedding,
+        Channel::InVote,
+        Channel::InBallots,
+        Channel::InDecision,
+        Channel::InMembership,
+        Channel::InPoll,
+        Channel::OutEmbedding,
+        Channel::OutVote,
+        Channel::OutBallots,
+        Channel::OutDecision,
+        Channel::State,
+    ];
+
+    fn topic(self) -> &'static str {
+        match self {
+            Channel::Config => "/spwi/config",
+            Channel::InDetections => "/spwi/in/detections",
+            Channel::InEmbedding => "/spwi/in/embedding",
+            Channel::InVote => "/spwi/in/vote",
+            Channel::InBallots => "/spwi/in/ballots",
+            Channel::InDecision => "/spwi/in/decision",
+            Channel::InMembership => "/spwi/in/membership",
+            Channel::InPoll => "/spwi/in/poll",
+            Channel::OutEmbedding => "/spwi/out/embedding",
+            Channel::OutVote => "/spwi/out/vote",
+            Channel::OutBallots => "/spwi/out/ballots",
+            Channel::OutDecision => "/spwi/out/decision",
+            Channel::State => "/spwi/state",
+        }
+    }
+
+    fn encoding(self) -> &'static str {
+        match self {
+            Channel::Config | Channel::InMembership | Channel::State => "json",
+            _ => BINCODE,
+        }
+    }
+
+    fn of_topic(topic: &str) -> Option<Channel> {
+        Channel::ALL.into_iter().find(|c| c.topic() == topic)
+    }
+}
 
 impl Recorder {
     pub fn create(path: &Path, config: &RecordedConfig) -> Result<Recorder> {
@@ -103,21 +153,20 @@ impl Recorder {
             .chunk_size(Some(64 * 1024))
             .create(BufWriter::new(file))
             .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-        let mut channels = HashMap::new();
-        for (topic, encoding) in TOPICS {
-            let id = writer.add_channel(0, topic, encoding, &BTreeMap::new())?;
-            channels.insert(topic, id);
+        let mut channels = [0; Channel::ALL.len()];
+        for c in Channel::ALL {
+            channels[c as usize] = writer.add_channel(0, c.topic(), c.encoding(), &BTreeMap::new())?;
         }
         let mut r = Recorder { writer, channels, sequence: 0 };
-        r.write("/spwi/config", Duration::ZERO, &serde_json::to_vec(config)?)?;
+        r.write(Channel::Config, Duration::ZERO, &serde_json::to_vec(config)?)?;
         Ok(r)
     }
 
-    fn write(&mut self, topic: &'static str, now: Duration, data: &[u8]) -> Result<()> {
+    fn write(&mut self, channel: Channel, now: Duration, data: &[u8]) -> Result<()> {
         self.sequence += 1;
         let t = now.as_nanos() as u64;
         let header = mcap::records::MessageHeader {
-            channel_id: self.channels[topic],
+            channel_id: self.channels[channel as usize],
             sequence: self.sequence,
             log_time: t,
             publish_time: t,
@@ -128,31 +177,31 @@ impl Recorder {
 
     pub fn input(&mut self, input: &Input, now: Duration) -> Result<()> {
         match input {
-            Input::Frame(m) => self.write("/spwi/in/detections", now, &encode(m)),
-            Input::Embedding(m) => self.write("/spwi/in/embedding", now, &encode(m)),
-            Input::Vote(m) => self.write("/spwi/in/vote", now, &encode(m)),
-            Input::Ballots(m) => self.write("/spwi/in/ballots", now, &encode(m)),
-            Input::Decision(m) => self.write("/spwi/in/decision", now, &encode(m)),
+            Input::Frame(m) => self.write(Channel::InDetections, now, &encode(m)),
+            Input::Embedding(m) => self.write(Channel::InEmbedding, now, &encode(m)),
+            Input::Vote(m) => self.write(Channel::InVote, now, &encode(m)),
+            Input::Ballots(m) => self.write(Channel::InBallots, now, &encode(m)),
+            Input::Decision(m) => self.write(Channel::InDecision, now, &encode(m)),
             Input::MemberJoined(r) | Input::MemberLeft(r) => {
                 let alive = matches!(input, Input::MemberJoined(_));
                 let json = serde_json::to_vec(&MembershipRecord { robot: r.clone(), alive })?;
-                self.write("/spwi/in/membership", now, &json)
+                self.write(Channel::InMembership, now, &json)
             }
-            Input::Poll => self.write("/spwi/in/poll", now, &[]),
+            Input::Poll => self.write(Channel::InPoll, now, &[]),
         }
     }
 
     pub fn output(&mut self, output: &Output, now: Duration) -> Result<()> {
         match output {
-            Output::Embedding(m) => self.write("/spwi/out/embedding", now, &encode(m)),
-            Output::Vote(m) => self.write("/spwi/out/vote", now, &encode(m)),
-            Output::Ballots(m) => self.write("/spwi/out/ballots", now, &encode(m)),
-            Output::Decision(m) => self.write("/spwi/out/decision", now, &encode(m)),
+            Output::Embedding(m) => self.write(Channel::OutEmbedding, now, &encode(m)),
+            Output::Vote(m) => self.write(Channel::OutVote, now, &encode(m)),
+            Output::Ballots(m) => self.write(Channel::OutBallots, now, &encode(m)),
+            Output::Decision(m) => self.write(Channel::OutDecision, now, &encode(m)),
         }
     }
 
     pub fn state(&mut self, state: &PeerState, now: Duration) -> Result<()> {
-        self.write("/spwi/state", now, &serde_json::to_vec(state)?)
+        self.write(Channel::State, now, &serde_json::to_vec(state)?)
     }
 
     /// Writes the summary and closes the file; a recording cut short (the process
@@ -190,24 +239,24 @@ pub fn read(path: &Path) -> Result<Recording> {
         let now = Duration::from_nanos(m.log_time);
         let ctx = || format!("{}: record {} on {}", path.display(), m.sequence, m.channel.topic);
         let d = &m.data[..];
-        match m.channel.topic.as_str() {
-            "/spwi/config" => config = Some(serde_json::from_slice(d).with_context(ctx)?),
-            "/spwi/in/detections" => inputs.push((now, Input::Frame(decode(d).with_context(ctx)?))),
-            "/spwi/in/embedding" => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
-            "/spwi/in/vote" => inputs.push((now, Input::Vote(decode(d).with_context(ctx)?))),
-            "/spwi/in/ballots" => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
-            "/spwi/in/decision" => inputs.push((now, Input::Decision(decode(d).with_context(ctx)?))),
-            "/spwi/in/membership" => {
+        match Channel::of_topic(&m.channel.topic) {
+            Some(Channel::Config) => config = Some(serde_json::from_slice(d).with_context(ctx)?),
+            Some(Channel::InDetections) => inputs.push((now, Input::Frame(decode(d).with_context(ctx)?))),
+            Some(Channel::InEmbedding) => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
+            Some(Channel::InVote) => inputs.push((now, Input::Vote(decode(d).with_context(ctx)?))),
+            Some(Channel::InBallots) => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
+            Some(Channel::InDecision) => inputs.push((now, Input::Decision(decode(d).with_context(ctx)?))),
+            Some(Channel::InMembership) => {
                 let r: MembershipRecord = serde_json::from_slice(d).with_context(ctx)?;
                 inputs.push((now, if r.alive { Input::MemberJoined(r.robot) } else { Input::MemberLeft(r.robot) }));
             }
-            "/spwi/in/poll" => inputs.push((now, Input::Poll)),
-            "/spwi/out/embedding" => outputs.push(Output::Embedding(decode(d).with_context(ctx)?)),
-            "/spwi/out/vote" => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
-            "/spwi/out/ballots" => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
-            "/spwi/out/decision" => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
-            "/spwi/state" => states.push(serde_json::from_slice(d).with_context(ctx)?),
-            other => bail!("{}: unknown topic {other:?} (not a spwi recording?)", path.display()),
+            Some(Channel::InPoll) => inputs.push((now, Input::Poll)),
+            Some(Channel::OutEmbedding) => outputs.push(Output::Embedding(decode(d).with_context(ctx)?)),
+            Some(Channel::OutVote) => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
+            Some(Channel::OutBallots) => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
+            Some(Channel::OutDecision) => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
+            Some(Channel::State) => states.push(serde_json::from_slice(d).with_context(ctx)?),
+            None => bail!("{}: unknown topic {:?} (not a spwi recording?)", path.display(), m.channel.topic),
         }
     }
     let config = config.with_context(|| format!("{}: no /spwi/config record", path.display()))?;

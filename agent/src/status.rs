@@ -1,6 +1,7 @@
 //! What `/status` reports: a snapshot the tick loop refreshes after each decision and
 //! membership change, so HTTP readers never touch the loop's state.
 
+use crate::engine::Engine;
 use crate::metrics::Metrics;
 use serde::Serialize;
 use spwi_proto::{DecisionMsg, RobotId};
@@ -56,6 +57,20 @@ pub struct Status {
 pub type SharedStatus = Arc<Mutex<Status>>;
 
 impl Status {
+    /// Takes in the engine's state after an event that decided `decided` (or changed
+    /// the members): who is live, the last decision, duplicates of our id, the feeds
+    /// set aside, trust and the counters.
+    pub fn refresh(&mut self, engine: &Engine, decided: Vec<RecentDecision>) {
+        self.members = engine.members();
+        self.last_decision = engine.last_decision.clone();
+        self.remember(decided);
+        self.duplicate_robot_id = engine.duplicates.iter().copied().collect();
+        self.feed_stale = engine.feed_is_stale();
+        self.stale_peers = engine.stale_peers();
+        self.trust = engine.trust();
+        self.metrics = engine.metrics.clone();
+    }
+
     /// Appends new decisions, forgetting the oldest beyond [`RECENT_DECISIONS`].
     pub fn remember(&mut self, decided: impl IntoIterator<Item = RecentDecision>) {
         self.recent_decisions.extend(decided);

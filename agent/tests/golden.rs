@@ -1,5 +1,6 @@
 //! Golden tests: every runtime reproduces the outputs onnxruntime-Python gave for the
-//! reference inputs shipped beside the models (`reference.json`), within 1e-4; and a
+//! reference inputs shipped beside the models (`reference.json`), within 1e-4, run after
+//! run (no state carried from one run to the next); and a
 //! model set that does not match its manifest is refused with an error naming the
 //! file, the tensor and both shapes.
 //!
@@ -32,12 +33,19 @@ fn check_backend(backend: Backend) {
             let floats = |v: &serde_json::Value| -> Vec<f32> {
                 v["data"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect()
             };
-            let inputs: Vec<(Vec<usize>, Vec<f32>)> =
-                spec.inputs.iter().map(|t| (t.shape.clone(), floats(&reference[name]["inputs"][&t.name]))).collect();
+            let inputs: Vec<(Vec<usize>, Vec<f32>)> = spec
+                .inputs
+                .iter()
+                .map(|t| (t.shape.clone(), floats(&reference[name.name()]["inputs"][&t.name])))
+                .collect();
             let feed: Vec<Input<'_>> = inputs.iter().map(|(s, d)| Input { shape: s, data: d }).collect();
-            let got = set.runner(name).unwrap().run(&feed).unwrap();
+            let mut runner = set.runner(name).unwrap();
+            let got = runner.run(&feed).unwrap();
+            // A run must not depend on the runs before it (a recurrent state carried
+            // over would make the second window read as the first one's sequel).
+            assert_eq!(runner.run(&feed).unwrap(), got, "{} {backend:?} {name}: a second run differs", dir.display());
             for (out, spec_out) in got.iter().zip(&spec.outputs) {
-                let want = floats(&reference[name]["outputs"][&spec_out.name]);
+                let want = floats(&reference[name.name()]["outputs"][&spec_out.name]);
                 assert_eq!(out.len(), want.len(), "{name}.{}", spec_out.name);
                 let worst = out.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
                 assert!(

@@ -5,6 +5,7 @@
 //! precision. A model that learned "slot 2 on the training floors" fails this test.
 
 use spwi_agent::floor::relations::{PER_STATION, TRACK_VALUES};
+use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Backend, Input, ModelSet};
 use spwi_agent::temporal::RowLayout;
 use spwi_proto::{KEYPOINT_VALUES, NUM_CLASSES};
@@ -32,10 +33,10 @@ fn reordering_the_stations_reorders_the_default_sets_logits() {
     let reference: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
     let order = [2, 0, 3, 1];
-    for name in ["ego_gru", "collective_gru"] {
-        let spec = set.manifest.models.by_name(name).unwrap();
+    for name in [ModelKind::EgoGru, ModelKind::CollectiveGru] {
+        let spec = set.manifest.models.get(name).unwrap();
         let shape = &spec.inputs[0].shape;
-        let x: Vec<f32> = reference[name]["inputs"][&spec.inputs[0].name]["data"]
+        let x: Vec<f32> = reference[name.name()]["inputs"][&spec.inputs[0].name]["data"]
             .as_array()
             .unwrap()
             .iter()

@@ -79,20 +79,6 @@ pub enum DecodeError {
     RobotMismatch { kind: &'static str, key: RobotId, payload: RobotId },
 }
 
-impl DecodeError {
-    /// A short label for metrics (`bad_messages_total{reason=...}`).
-    pub fn reason(&self) -> &'static str {
-        match self {
-            DecodeError::TooLarge { .. } => "too_large",
-            DecodeError::UnknownVersion { .. } => "version",
-            DecodeError::Malformed { .. } => "malformed",
-            DecodeError::TrailingBytes { .. } => "trailing",
-            DecodeError::Invalid { .. } => "invalid",
-            DecodeError::RobotMismatch { .. } => "robot_mismatch",
-        }
-    }
-}
-
 /// Encodes a message with the protocol version in front.
 pub fn encode<M: Message>(msg: &M) -> Vec<u8> {
     // Encoding into a Vec only fails if a serde impl reports an error, which derived

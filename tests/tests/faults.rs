@@ -5,6 +5,7 @@
 //! Run: `cargo test -p spwi-tests --test faults -- --nocapture` to see the timings.
 
 use spwi_agent::config::AgentConfig;
+use spwi_agent::metrics::DropReason;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
 use spwi_tests::*;
@@ -132,10 +133,16 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
         // a reads its own detections and everyone's embedding, vote and decision keys:
         // 7 bad payloads on 2 robots' keys for 3 topics + on its own detections.
         assert!(bad >= 7 * 7, "only {bad} bad messages counted: {:?}", status.metrics.bad_messages);
-        for reason in ["malformed", "version", "too_large", "invalid", "robot_mismatch"] {
+        for reason in [
+            DropReason::Malformed,
+            DropReason::Version,
+            DropReason::TooLarge,
+            DropReason::Invalid,
+            DropReason::RobotMismatch,
+        ] {
             assert!(
-                status.metrics.bad_messages.get(reason).copied().unwrap_or(0) > 0,
-                "no {reason}: {:?}",
+                status.metrics.bad_messages.get(&reason).copied().unwrap_or(0) > 0,
+                "no {reason:?}: {:?}",
                 status.metrics.bad_messages
             );
         }

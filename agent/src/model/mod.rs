@@ -11,7 +11,7 @@ mod ort;
 mod tract;
 
 use crate::graph::StarGraph;
-use crate::manifest::{Manifest, ModelSpec};
+use crate::manifest::{Manifest, ModelKind, ModelSpec};
 use crate::temporal::TemporalModel;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -107,33 +107,26 @@ impl ModelSet {
 
     /// Run state for one robot using `temporal` as its GRU.
     pub fn inference(self: &Arc<Self>, temporal: TemporalModel) -> Result<Inference> {
-        let gru = match temporal {
-            TemporalModel::Ego => &self.ego_gru,
-            TemporalModel::Collective => &self.collective_gru,
-        };
-        Ok(Inference { set: Arc::clone(self), gcn: Gcn { runner: self.gcn.runner()? }, gru: gru.runner()?, temporal })
+        let gru = self.runner(ModelKind::gru(temporal))?;
+        Ok(Inference { set: Arc::clone(self), gcn: Gcn { runner: self.gcn.runner()? }, gru, temporal })
     }
 
     /// The GRU's softmax temperature T for `temporal`.
     pub fn temperature(&self, temporal: TemporalModel) -> f32 {
-        let spec = match temporal {
-            TemporalModel::Ego => &self.manifest.models.ego_gru,
-            TemporalModel::Collective => &self.manifest.models.collective_gru,
-        };
+        let spec = self.manifest.models.get(ModelKind::gru(temporal)).expect("every set has both GRUs");
         spec.temperature.unwrap_or(1.0) // validated present by Manifest::load
     }
 
-    /// Raw access to one model by manifest name, for golden tests and benchmarks.
-    pub fn runner(&self, name: &str) -> Result<Box<dyn Runner>> {
-        match name {
-            "gcn" => self.gcn.runner(),
-            "ego_gru" => self.ego_gru.runner(),
-            "collective_gru" => self.collective_gru.runner(),
-            "cnn1d" => match &self.cnn1d {
+    /// One model's own runner (the golden tests, the benchmarks, the evaluation's baselines).
+    pub fn runner(&self, kind: ModelKind) -> Result<Box<dyn Runner>> {
+        match kind {
+            ModelKind::Gcn => self.gcn.runner(),
+            ModelKind::EgoGru => self.ego_gru.runner(),
+            ModelKind::CollectiveGru => self.collective_gru.runner(),
+            ModelKind::Cnn1d => match &self.cnn1d {
                 Some(m) => m.runner(),
                 None => bail!("model set {:?} ships no cnn1d baseline", self.manifest.name),
             },
-            _ => bail!("no model named {name:?} (gcn, ego_gru, collective_gru, cnn1d)"),
         }
     }
 }

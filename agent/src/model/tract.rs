@@ -1,5 +1,8 @@
 //! The tract runtime: each model is optimised once into a runnable plan shared by all
-//! robots; each robot spawns its own state from it.
+//! robots, and every run starts from a fresh state of it. A state must not be reused:
+//! tract's recurrent ops (the GRUs become a `Scan`) keep their hidden state in it and
+//! start the next run from where the last one ended, so a window would be read after
+//! the previous one instead of from zero, as the models were trained.
 
 use super::{Input, LoadedModel, Runner};
 use anyhow::{Context, Result};
@@ -24,12 +27,12 @@ impl TractModel {
 
 impl LoadedModel for TractModel {
     fn runner(&self) -> Result<Box<dyn Runner>> {
-        Ok(Box::new(TractRunner { state: self.plan.spawn()? }))
+        Ok(Box::new(TractRunner { plan: Arc::clone(&self.plan) }))
     }
 }
 
 struct TractRunner {
-    state: TypedSimpleState,
+    plan: Arc<TypedRunnableModel>,
 }
 
 impl Runner for TractRunner {
@@ -38,7 +41,7 @@ impl Runner for TractRunner {
             .iter()
             .map(|i| Tensor::from_shape(i.shape, i.data).map(TValue::from))
             .collect::<TractResult<TVec<_>>>()?;
-        let outputs = self.state.run(inputs)?;
+        let outputs = self.plan.run(inputs)?; // a fresh state: see the module's doc
         outputs.iter().map(|o| Ok(o.to_plain_array_view::<f32>()?.iter().copied().collect())).collect()
     }
 }

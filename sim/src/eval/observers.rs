@@ -9,6 +9,7 @@ use super::cvm::{Cvm, HEAD_HEIGHT};
 use anyhow::Result;
 use spwi_agent::floor::{self, CameraCalibration, FloorView, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
+use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Inference, Input, ModelSet, Runner};
 use spwi_agent::temporal::{frame_offsets, normalise_keypoints, Row, RowLayout, TemporalModel, Window, CNN1D_DIM};
 use spwi_agent::vote;
@@ -62,7 +63,7 @@ impl Observers {
             graph: GraphBuilder::new(m.max_nodes, m.edge_weight),
             ego: models.inference(TemporalModel::Ego)?,
             ego_rows: Window::with_frames(m.window, m.frames(), m.row),
-            cnn1d: m.models.cnn1d.is_some().then(|| models.runner("cnn1d")).transpose()?,
+            cnn1d: m.models.cnn1d.is_some().then(|| models.runner(ModelKind::Cnn1d)).transpose()?,
             cnn_rows: BTreeMap::new(),
             cvm: Cvm::new(spwi_proto::TICK_PERIOD.as_secs_f32()),
             camera,

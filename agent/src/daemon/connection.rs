@@ -1,0 +1,136 @@
+//! The daemon's place in the fleet: its Zenoh session, the check that no live daemon
+//! holds its robot id, its liveliness token, and its subscriptions. Zenoh callbacks
+//! only parse the key and queue the raw bytes (bounded queue; overflow is counted,
+//! never blocks Zenoh); everything else happens in the event loop.
+
+use anyhow::{anyhow, bail, Result};
+use spwi_proto::keys::{self, Topic};
+use spwi_proto::{FleetId, RobotId};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::mpsc;
+use zenoh::sample::SampleKind;
+
+/// A message as the Zenoh callbacks hand it to the loop.
+pub(super) struct Message {
+    pub topic: Topic,
+    pub robot: RobotId,
+    pub bytes: Vec<u8>,
+}
+
+/// A liveliness change. These travel on their own unbounded queue: they are rare, and
+/// losing one would leave a ghost member (or miss a new one) for good.
+pub(super) struct Membership {
+    pub robot: RobotId,
+    pub alive: bool,
+}
+
+/// An open connection to the fleet and the queues its callbacks fill.
+pub(super) struct Connection {
+    pub session: zenoh::Session,
+    pub messages: mpsc::Receiver<Message>,
+    pub membership: mpsc::UnboundedReceiver<Membership>,
+    /// Messages the callbacks dropped because the queue was full, since last taken.
+    pub overflow: Arc<AtomicU64>,
+    token: zenoh::liveliness::LivelinessToken,
+    subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    membership_subscriber: zenoh::pubsub::Subscriber<()>,
+    alive_key: String,
+}
+
+impl Connection {
+    /// Opens the session, refuses a robot id a live daemon holds, declares this
+    /// robot's liveliness token and subscribes to what it reads: its own detections
+    /// and every robot's embeddings, votes, decisions and relayed ballots.
+    pub async fn open(zenoh: zenoh::Config, fleet: &FleetId, robot: &RobotId, queue: usize) -> Result<Connection> {
+        let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
+        let alive_key = keys::alive(fleet, robot);
+        refuse_duplicate(&session, &alive_key, robot).await?;
+        let token = session.liveliness().declare_token(&alive_key).await.map_err(|e| anyhow!("{alive_key}: {e}"))?;
+
+        let (tx, messages) = mpsc::channel::<Message>(queue);
+        let overflow = Arc::new(AtomicU64::new(0));
+        let mut subscribers = Vec::new();
+        for (key, topic) in [
+            (keys::robot_topic(fleet, robot, Topic::Detections), Topic::Detections),
+            (keys::all_robots(fleet, Topic::Embedding), Topic::Embedding),
+            (keys::all_robots(fleet, Topic::Vote), Topic::Vote),
+            (keys::all_robots(fleet, Topic::Decision), Topic::Decision),
+            (keys::all_robots(fleet, Topic::Ballots), Topic::Ballots),
+        ] {
+            let (tx, overflow, fleet) = (tx.clone(), overflow.clone(), fleet.clone());
+            let sub = session
+                .declare_subscriber(&key)
+                .callback(move |s| {
+                    if let Some((robot, t)) = keys::parse_robot_topic(&fleet, s.key_expr().as_str()) {
+                        debug_assert_eq!(t, topic);
+                        let ev = Message { topic: t, robot, bytes: s.payload().to_bytes().into_owned() };
+                        if tx.try_send(ev).is_err() {
+                            overflow.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                })
+                .await
+                .map_err(|e| anyhow!("subscribing to {key}: {e}"))?;
+            subscribers.push(sub);
+        }
+        let (member_tx, membership) = mpsc::unbounded_channel::<Membership>();
+        let membership_subscriber = {
+            let fleet = fleet.clone();
+            session
+                .liveliness()
+                .declare_subscriber(keys::all_alive(&fleet))
+                .history(true)
+                .callback(move |s| {
+                    if let Some(robot) = keys::parse_alive(&fleet, s.key_expr().as_str()) {
+                        let _ = member_tx.send(Membership { robot, alive: s.kind() == SampleKind::Put });
+                    }
+                })
+                .await
+                .map_err(|e| anyhow!("subscribing to membership: {e}"))?
+        };
+        Ok(Connection { session, messages, membership, overflow, token, subscribers, membership_subscriber, alive_key })
+    }
+
+    /// Leaves the fleet: the subscriptions end, the token is withdrawn (peers see this
+    /// robot leave at once rather than when its lease runs out) and the session closes.
+    /// Failures are logged: the daemon is leaving either way.
+    pub async fn close(self) {
+        let Connection { session, token, subscribers, membership_subscriber, alive_key, .. } = self;
+        drop(subscribers);
+        drop(membership_subscriber);
+        if let Err(e) = token.undeclare().await {
+            tracing::warn!("withdrawing {alive_key}: {e}");
+        }
+        if let Err(e) = session.close().await {
+            tracing::warn!("closing the Zenoh session: {e}");
+        }
+    }
+}
+
+/// Refuses to start when a live daemon already holds our liveliness token. Peers only
+/// answer for themselves and the mesh takes a moment to form after `open`, so the
+/// question is asked a few times over about a second before the token is declared.
+async fn refuse_duplicate(session: &zenoh::Session, alive_key: &str, robot: &RobotId) -> Result<()> {
+    for attempt in 0..4 {
+        if attempt > 0 {
+            tokio::time::sleep(Duration::from_millis(300)).await;
+        }
+        let replies = session.liveliness().get(alive_key).await.map_err(|e| anyhow!("{alive_key}: {e}"))?;
+        let found = tokio::time::timeout(Duration::from_secs(1), async {
+            while let Ok(reply) = replies.recv_async().await {
+                if reply.result().is_ok() {
+                    return true;
+                }
+            }
+            false
+        })
+        .await
+        .unwrap_or(false);
+        if found {
+            bail!("robot id \"{robot}\" is already in use by a live daemon of this fleet ({alive_key}); give each robot a unique --robot-id");
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,239 @@
+//! The daemon: Zenoh in, the [`Engine`] in the middle, Zenoh out.
+//!
+//! One event loop owns the engine ([`run`]). What comes in is queued raw by the Zenoh
+//! callbacks ([`connection`]); decoding, checks and counting happen in the loop, so a
+//! bad message costs one log line (rate-limited, [`log`]) and one counter. The loop
+//! also wakes at the engine's next deadline, so ticks are decided on time even when
+//! peers fall silent. What goes out is put on Zenoh by a thread of its own
+//! ([`publishing`]), and `/status` is refreshed after each decision and membership
+//! change.
+//!
+//! Start-up refuses to join a fleet where a live daemon already holds our robot id
+//! (Zenoh would merge the two liveliness tokens into one member); a clash that happens
+//! later (both started at once) is detected from the instance ids in the messages and
+//! reported in logs, `/status` and `/metrics`.
+
+mod connection;
+mod log;
+mod publishing;
+
+use crate::config::AgentConfig;
+use crate::engine::{Engine, EngineConfig, Input, Output};
+use crate::metrics::DropReason;
+use crate::model::ModelSet;
+use crate::record::{PeerState, RecordedConfig, Recorder};
+use crate::status::{RecentDecision, SharedStatus, Status};
+use anyhow::Result;
+use connection::{Connection, Membership, Message};
+use log::RateLimitedLog;
+use publishing::Outbox;
+use spwi_proto::keys::Topic;
+use spwi_proto::*;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::watch;
+
+/// Who this daemon is and how it connects.
+pub struct Options {
+    pub robot: RobotId,
+    pub fleet: FleetId,
+    pub config: AgentConfig,
+    pub zenoh: zenoh::Config,
+    /// Record every input and output of the engine to this MCAP file.
+    pub record: Option<std::path::PathBuf>,
+    /// The fleet's credentials when it is secured (`--fleet-dir`); `zenoh` already
+    /// carries their TLS and access rules.
+    pub credentials: Option<Arc<crate::fleet::Credentials>>,
+}
+
+/// Loads the model set named by the config.
+pub fn load_models(cfg: &AgentConfig) -> Result<Arc<ModelSet>> {
+    let set = ModelSet::load(&cfg.models.dir, cfg.models.backend, cfg.models.ort_library.as_deref())?;
+    if set.manifest.fixture {
+        tracing::warn!(dir = %set.dir.display(), "running FIXTURE models (random weights): decisions are plumbing tests, not predictions");
+    }
+    Ok(set)
+}
+
+/// A running daemon's handles, for callers that embed it (tests, the demo).
+pub struct Started {
+    pub status: SharedStatus,
+    pub http: Option<std::net::SocketAddr>,
+}
+
+/// Runs the daemon until `shutdown` turns true, then leaves the fleet cleanly
+/// (undeclares the liveliness token, closes the session). `ready` receives the
+/// status handle once the daemon has joined.
+pub async fn run(
+    opts: Options,
+    models: Arc<ModelSet>,
+    mut shutdown: watch::Receiver<bool>,
+    ready: Option<tokio::sync::oneshot::Sender<Started>>,
+) -> Result<()> {
+    let Options { robot, fleet, config, zenoh, record, credentials } = opts;
+    config.validate()?;
+    let instance = random_instance();
+    let m = &models.manifest;
+    let engine_config = EngineConfig::new(robot.clone(), instance, &config.tick, &config.camera, m);
+    let mut recorder = match &record {
+        Some(path) => {
+            Some(Recorder::create(path, &RecordedConfig { engine: engine_config.clone(), model_set: m.name.clone() })?)
+        }
+        None => None,
+    };
+    let mut engine = Engine::new(engine_config, models.inference(config.tick.temporal)?);
+
+    let mut conn = Connection::open(zenoh, &fleet, &robot, config.tick.event_queue).await?;
+    let outbox = Outbox::start(&conn.session, &fleet, &robot).await?;
+
+    let status: SharedStatus = Arc::new(Mutex::new(Status {
+        robot: robot.to_string(),
+        fleet: fleet.to_string(),
+        instance,
+        model_set: models.manifest.name.clone(),
+        fixture_models: models.manifest.fixture,
+        backend: format!("{:?}", models.backend).to_lowercase(),
+        temporal: format!("{:?}", config.tick.temporal).to_lowercase(),
+        consensus: config.tick.consensus.name().to_owned(),
+        identity: credentials.as_ref().map(|c| c.identity.name.to_string()),
+        members: engine.members(),
+        last_decision: None,
+        recent_decisions: Default::default(),
+        duplicate_robot_id: Vec::new(),
+        feed_stale: false,
+        stale_peers: Vec::new(),
+        trust: Default::default(),
+        metrics: engine.metrics.clone(),
+    }));
+    let mut http_task = None;
+    let mut http_addr = None;
+    if let Some(addr) = config.http.listen {
+        let (bound, fut) = crate::http::serve(addr, status.clone(), shutdown.clone()).await?;
+        http_addr = Some(bound);
+        http_task = Some(tokio::spawn(fut));
+    }
+    let secured = credentials.is_some();
+    tracing::info!(%robot, %fleet, instance, secured, http = ?http_addr, model_set = %models.manifest.name, "joined the fleet");
+    if let Some(ready) = ready {
+        let _ = ready.send(Started { status: status.clone(), http: http_addr });
+    }
+
+    let mut signed_votes = credentials.map(|c| crate::fleet::signed_votes::SignedVotes::new(c, robot.clone()));
+    let start = Instant::now();
+    let mut bad_log = RateLimitedLog::new(Duration::from_secs(5));
+    let mut slow_log = RateLimitedLog::new(Duration::from_secs(5));
+    loop {
+        let deadline = engine.next_deadline().map(|d| tokio::time::Instant::from_std(start + d));
+        let mut input = tokio::select! {
+            _ = shutdown.changed() => break,
+            Some(Membership { robot: r, alive }) = conn.membership.recv() => {
+                tracing::info!(robot = %r, alive, "membership change");
+                if alive { Input::MemberJoined(r) } else { Input::MemberLeft(r) }
+            }
+            msg = conn.messages.recv() => match msg {
+                None => break,
+                Some(Message { topic, robot: r, bytes }) => match decode_input(topic, &r, &bytes) {
+                    Ok(i) => i,
+                    Err(e) => {
+                        engine.metrics.bad_messages(DropReason::from(&e), 1);
+                        bad_log.warn(|| format!("dropped a bad message on {}'s {}: {e}", r, topic.as_str()));
+                        continue;
+                    }
+                },
+            },
+            _ = sleep_until(deadline) => Input::Poll,
+        };
+        if let Some(s) = signed_votes.as_mut() {
+            let forged = s.check(&mut input);
+            if forged > 0 {
+                engine.metrics.bad_messages(DropReason::ForgedRelayedVote, forged as u64);
+                bad_log.warn(|| format!("dropped {forged} relayed vote(s) without their origin's signature"));
+            }
+        }
+        let membership_change = matches!(input, Input::MemberJoined(_) | Input::MemberLeft(_));
+        let now = start.elapsed();
+        if let Some(r) = recorder.as_mut() {
+            if let Err(e) = r.input(&input, now) {
+                tracing::error!("recording stopped: {e:#}");
+                recorder = None;
+            }
+        }
+        let outputs = engine.handle(input, now);
+        let took = start.elapsed() - now;
+        if took > TICK_PERIOD {
+            slow_log
+                .warn(|| format!("one event took {} ms, longer than a tick: decisions will be late", took.as_millis()));
+        }
+        if let Some(r) = recorder.as_mut() {
+            let states = PeerState::after(&engine, &outputs);
+            let recorded = outputs.iter().try_for_each(|o| r.output(o, now));
+            if let Err(e) = recorded.and_then(|()| states.iter().try_for_each(|s| r.state(s, now))) {
+                tracing::error!("recording stopped: {e:#}");
+                recorder = None;
+            }
+        }
+        let mut decided = Vec::new();
+        for mut o in outputs {
+            if let Some(s) = signed_votes.as_mut() {
+                s.sign(&mut o);
+            }
+            if let Output::Decision(m) = &o {
+                decided.push(RecentDecision { tick: m.tick, class: m.steps.first().map(|s| s.class) });
+            }
+            if !outbox.publish(&o) {
+                bad_log.warn(|| "Zenoh is holding up publishing: dropping outgoing messages".to_owned());
+            }
+        }
+        if !decided.is_empty() || membership_change {
+            let lost = conn.overflow.swap(0, Ordering::Relaxed);
+            if lost > 0 {
+                engine.metrics.bad_messages(DropReason::QueueFull, lost);
+            }
+            engine.metrics.outgoing_dropped += outbox.take_dropped();
+            if let Ok(mut s) = status.lock() {
+                s.refresh(&engine, decided);
+            }
+        }
+    }
+
+    tracing::info!(%robot, "leaving the fleet");
+    if let Some(r) = recorder {
+        if let Err(e) = r.finish() {
+            tracing::error!("finishing the recording: {e:#}");
+        }
+    }
+    outbox.finish().await; // what is queued is sent first
+    conn.close().await;
+    if let Some(t) = http_task {
+        if let Err(e) = t.await {
+            tracing::warn!("the HTTP server task ended badly: {e}");
+        }
+    }
+    Ok(())
+}
+
+fn decode_input(topic: Topic, robot: &RobotId, bytes: &[u8]) -> Result<Input, DecodeError> {
+    Ok(match topic {
+        Topic::Detections => Input::Frame(decode_from(bytes, robot)?),
+        Topic::Embedding => Input::Embedding(decode_from(bytes, robot)?),
+        Topic::Vote => Input::Vote(decode_from(bytes, robot)?),
+        Topic::Decision => Input::Decision(decode_from(bytes, robot)?),
+        Topic::Ballots => Input::Ballots(decode_from(bytes, robot)?),
+    })
+}
+
+async fn sleep_until(deadline: Option<tokio::time::Instant>) {
+    match deadline {
+        Some(d) => tokio::time::sleep_until(d).await,
+        None => std::future::pending().await,
+    }
+}
+
+fn random_instance() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u128(std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default().as_nanos());
+    h.write_u32(std::process::id());
+    h.finish()
+}
