@@ -158,7 +158,7 @@ pub fn write_all(st: &Studies, dir: &Path) -> Result<Vec<PathBuf>> {
             st.horizons
                 .iter()
                 .filter(|r| r.robots == robots)
-                .map(|r| (r.window as f64 / 10.0, f(r)))
+                .map(|r| (r.window as f64 * spwi_proto::TICK_PERIOD.as_secs_f64(), f(r)))
                 .collect::<Vec<_>>()
         };
         let s = if robots > 1 { "s" } else { "" };

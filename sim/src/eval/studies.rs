@@ -361,8 +361,8 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         let _ = writeln!(
             w,
             "| {:.0} s → {:.0} s | {} | {c} | {cf} | {} | {} |",
-            r.window as f64 / 10.0,
-            r.horizon as f64 / 10.0,
+            r.window as f64 * spwi_proto::TICK_PERIOD.as_secs_f64(),
+            r.horizon as f64 * spwi_proto::TICK_PERIOD.as_secs_f64(),
             r.robots,
             acc(r, "ego").0,
             acc(r, "team_all_ticks").0
