@@ -230,17 +230,13 @@ impl Manifest {
             let kind = ModelKind::gru(temporal);
             let spec = self.models.get(kind).expect("every set has both GRUs");
             expect(spec, kind, &[&[1, w, temporal.row_dim(self.row)]], &[&[1, steps, NUM_CLASSES]])?;
+            match spec.temperature {
+                Some(t) if t.is_finite() && t > 0.0 => {}
+                other => return bad(format!("{kind}.temperature is {other:?}; it must be a positive number")),
+            }
         }
         if let Some(cnn) = &self.models.cnn1d {
             expect(cnn, ModelKind::Cnn1d, &[&[1, w, CNN1D_DIM]], &[&[1, steps, NUM_CLASSES]])?;
-        }
-        for (what, spec) in
-            [(ModelKind::EgoGru, &self.models.ego_gru), (ModelKind::CollectiveGru, &self.models.collective_gru)]
-        {
-            match spec.temperature {
-                Some(t) if t.is_finite() && t > 0.0 => {}
-                other => return bad(format!("{what}.temperature is {other:?}; it must be a positive number")),
-            }
         }
         Ok(())
     }
