@@ -1,14 +1,20 @@
 //! The tract runtime: each model is optimised once into a runnable plan shared by all
-//! robots, and every run starts from a fresh state of it. A state must not be reused:
-//! tract's recurrent ops (the GRUs become a `Scan`) keep their hidden state in it and
-//! start the next run from where the last one ended, so a window would be read after
-//! the previous one instead of from zero, as the models were trained.
+//! robots, and each runner keeps one state of it, reused run after run (it holds
+//! tract's scratch buffers and the GRUs' packed weights, so nothing is set up per tick).
+//!
+//! tract turns an ONNX GRU into a recurrent op (`GruSeq`, or a `Scan` in general) that
+//! by default keeps its hidden state in that state and starts the next run from where
+//! the last one ended: a window would be read as the sequel of the previous one instead
+//! of from zero, as the models were trained. Every recurrent op of the optimised model
+//! is therefore told to restart from its initial state on every run (ONNX's contract);
+//! `tests/golden.rs` runs every model twice and requires the same output.
 
 use super::{Input, LoadedModel, Runner};
 use anyhow::{Context, Result};
 use std::path::Path;
 use std::sync::Arc;
 use tract_onnx::prelude::*;
+use tract_onnx::tract_core::ops::{gru_seq::GruSeq, scan::OptScan};
 
 pub struct TractModel {
     plan: Arc<TypedRunnableModel>,
@@ -19,20 +25,36 @@ impl TractModel {
         let plan = tract_onnx::onnx()
             .model_for_path(path)
             .and_then(|m| m.into_optimized())
+            .map(restart_recurrences_every_run)
             .and_then(|m| m.into_runnable())
             .with_context(|| format!("{}: tract cannot load and optimise this model", path.display()))?;
         Ok(TractModel { plan })
     }
 }
 
+/// Makes every recurrent op of an optimised model start from its initial state on
+/// every run instead of carrying the last run's final state into the next.
+fn restart_recurrences_every_run(mut model: TypedModel) -> TypedModel {
+    for node in &mut model.nodes {
+        if let Some(gru) = node.op_as_mut::<GruSeq>() {
+            gru.reset_every_turn = true;
+        } else if let Some(scan) = node.op_as::<OptScan>() {
+            let mut params = (**scan).clone();
+            params.reset_every_turn = true;
+            node.op = Box::new(OptScan::new(Arc::new(params)));
+        }
+    }
+    model
+}
+
 impl LoadedModel for TractModel {
     fn runner(&self) -> Result<Box<dyn Runner>> {
-        Ok(Box::new(TractRunner { plan: Arc::clone(&self.plan) }))
+        Ok(Box::new(TractRunner { state: TypedSimpleState::new(&self.plan)? }))
     }
 }
 
 struct TractRunner {
-    plan: Arc<TypedRunnableModel>,
+    state: TypedSimpleState,
 }
 
 impl Runner for TractRunner {
@@ -41,7 +63,7 @@ impl Runner for TractRunner {
             .iter()
             .map(|i| Tensor::from_shape(i.shape, i.data).map(TValue::from))
             .collect::<TractResult<TVec<_>>>()?;
-        let outputs = self.plan.run(inputs)?; // a fresh state: see the module's doc
+        let outputs = self.state.run(inputs)?;
         outputs.iter().map(|o| Ok(o.to_plain_array_view::<f32>()?.iter().copied().collect())).collect()
     }
 }
