@@ -242,15 +242,30 @@ pub struct Engine {
     peer_feeds: BTreeMap<RobotId, Repeats<Vec<f32>>>,
     /// Every robot's record of agreeing with the others, ours included.
     trust: TrustBook,
-    pub metrics: Metrics,
+    metrics: Metrics,
     /// Instance ids of other daemons seen using our robot id.
-    pub duplicates: BTreeSet<u64>,
-    pub last_decision: Option<DecisionMsg>,
+    duplicates: BTreeSet<u64>,
+    last_decision: Option<DecisionMsg>,
     /// The GCN's spatial-only logits for our latest frame that showed the worker.
     last_spatial: Option<(u64, [f32; NUM_CLASSES])>,
 }
 
 impl Engine {
+    /// What the engine counted and timed.
+    pub fn metrics(&self) -> &Metrics {
+        &self.metrics
+    }
+
+    /// Instance ids of other live daemons seen using our robot id.
+    pub fn duplicates(&self) -> &BTreeSet<u64> {
+        &self.duplicates
+    }
+
+    /// Our latest decision.
+    pub fn last_decision(&self) -> Option<&DecisionMsg> {
+        self.last_decision.as_ref()
+    }
+
     pub fn new(cfg: EngineConfig, inference: Inference) -> Self {
         let m = &inference.set().manifest;
         let graph = GraphBuilder::new(m.max_nodes, m.edge_weight);

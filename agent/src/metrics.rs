@@ -1,11 +1,18 @@
-//! Counters and latency histograms, rendered as Prometheus text for `/metrics` and
-//! summarised in `/status`. Owned by the daemon's single event loop (no atomics on
-//! the hot path); the HTTP side reads a snapshot refreshed once per decision.
+//! Counters and latency histograms, exposed as OpenMetrics text for `/metrics` (through
+//! prometheus-client: HELP and TYPE lines, label escaping) and summarised in `/status`.
+//! Owned by the daemon's single event loop as plain numbers (no atomics on the hot
+//! path); the HTTP side reads a snapshot refreshed once per decision and registers it
+//! in a registry of its own per scrape.
 
+use prometheus_client::encoding::{EncodeMetric, MetricEncoder, NoLabelSet};
+use prometheus_client::metrics::counter::ConstCounter;
+use prometheus_client::metrics::gauge::ConstGauge;
+use prometheus_client::metrics::MetricType;
+use prometheus_client::registry::Registry;
 use serde::Serialize;
 use spwi_proto::DecodeError;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
-use std::fmt::Write;
 use std::time::Duration;
 
 /// Bucket upper bounds in seconds: 50 µs … 1 s.
@@ -91,17 +98,6 @@ impl Histogram {
         }
         None
     }
-
-    fn render(&self, out: &mut String, name: &str, labels: &str) {
-        let mut cum = 0;
-        for (i, c) in self.counts.iter().enumerate() {
-            cum += c;
-            let le = BOUNDS.get(i).map_or("+Inf".to_string(), |b| b.to_string());
-            let _ = writeln!(out, "{name}_bucket{{{labels}le=\"{le}\"}} {cum}");
-        }
-        let _ = writeln!(out, "{name}_sum{{{}}} {}", labels.trim_end_matches(','), self.sum);
-        let _ = writeln!(out, "{name}_count{{{}}} {}", labels.trim_end_matches(','), self.count);
-    }
 }
 
 /// Pipeline stages timed per tick.
@@ -140,16 +136,12 @@ pub struct Metrics {
     pub late_messages: u64,
     /// Frames for a tick already decided (duplicates, replays): dropped.
     pub stale_frames: u64,
-    /// Messages refused before the engine, by reason.
-    pub bad_messages: BTreeMap<DropReason, u64>,
     /// Messages from another live daemon using our robot id.
     pub duplicate_id_messages: u64,
     /// Open ticks dropped because too many were open.
     pub evicted_ticks: u64,
     /// Model runs that failed (the tick goes on without this robot's vote).
     pub model_errors: u64,
-    /// Outgoing messages dropped because Zenoh held up the publisher task.
-    pub outgoing_dropped: u64,
     /// Peer decisions compared with ours, and how many were the same.
     pub agreement_compared: u64,
     pub agreement_same: u64,
@@ -173,14 +165,6 @@ impl Metrics {
         self.stages.entry(stage).or_default().observe(d);
     }
 
-    pub fn bad_messages(&mut self, reason: DropReason, n: u64) {
-        *self.bad_messages.entry(reason).or_default() += n;
-    }
-
-    pub fn bad_total(&self) -> u64 {
-        self.bad_messages.values().sum()
-    }
-
     /// Share of compared peer decisions equal to ours (1.0 before any comparison).
     pub fn agreement(&self) -> f64 {
         if self.agreement_compared == 0 {
@@ -190,79 +174,151 @@ impl Metrics {
         }
     }
 
-    /// Prometheus text exposition.
-    pub fn render(&self, robot: &str, members: usize) -> String {
-        let mut o = String::new();
-        let l = format!("robot=\"{robot}\"");
+    /// Registers every counter and histogram, as they stand, in `registry` (the
+    /// scrape's own: see [`exposition`]); `members` is the live member count.
+    pub fn register(&self, registry: &mut Registry, members: usize) {
         let counters: [(&str, &str, u64); 17] = [
-            ("spwi_frames_total", "detection frames processed", self.frames),
-            ("spwi_frames_with_worker_total", "frames in which the worker was seen", self.frames_with_worker),
-            ("spwi_decisions_total", "team decisions published", self.decisions),
+            ("spwi_frames", "detection frames processed", self.frames),
+            ("spwi_frames_with_worker", "frames in which the worker was seen", self.frames_with_worker),
+            ("spwi_decisions", "team decisions published", self.decisions),
+            ("spwi_decisions_by_deadline", "decisions taken when the deadline passed", self.decisions_by_deadline),
+            ("spwi_late_messages", "peer messages for an already decided tick", self.late_messages),
+            ("spwi_stale_frames", "frames for an already decided tick", self.stale_frames),
             (
-                "spwi_decisions_by_deadline_total",
-                "decisions taken when the deadline passed",
-                self.decisions_by_deadline,
-            ),
-            ("spwi_late_messages_total", "peer messages for an already decided tick", self.late_messages),
-            ("spwi_stale_frames_total", "frames for an already decided tick", self.stale_frames),
-            (
-                "spwi_duplicate_id_messages_total",
+                "spwi_duplicate_id_messages",
                 "messages from another daemon using our robot id",
                 self.duplicate_id_messages,
             ),
-            ("spwi_evicted_ticks_total", "open ticks dropped for lack of room", self.evicted_ticks),
-            ("spwi_model_errors_total", "failed model runs", self.model_errors),
+            ("spwi_evicted_ticks", "open ticks dropped for lack of room", self.evicted_ticks),
+            ("spwi_model_errors", "failed model runs", self.model_errors),
+            ("spwi_agreement_compared", "peer decisions compared with ours", self.agreement_compared),
+            ("spwi_agreement_same", "peer decisions equal to ours", self.agreement_same),
             (
-                "spwi_outgoing_dropped_total",
-                "outgoing messages dropped while Zenoh held up publishing",
-                self.outgoing_dropped,
-            ),
-            ("spwi_agreement_compared_total", "peer decisions compared with ours", self.agreement_compared),
-            (
-                "spwi_ballot_sets_differ_total",
+                "spwi_ballot_sets_differ",
                 "peer decisions whose ballot digest differs from ours",
                 self.ballot_sets_differ,
             ),
             (
-                "spwi_decided_on_fewer_ballots_total",
+                "spwi_decided_on_fewer_ballots",
                 "peer decisions that counted every ballot we did and more",
                 self.decided_on_fewer_ballots,
             ),
             (
-                "spwi_relayed_ballots_used_total",
+                "spwi_relayed_ballots_used",
                 "peer votes received only through another peer's relay",
                 self.relayed_ballots_used,
             ),
             (
-                "spwi_late_relayed_ballots_total",
+                "spwi_late_relayed_ballots",
                 "relayed votes that arrived after we decided without them",
                 self.late_relayed_ballots,
             ),
-            ("spwi_repeated_frames_total", "own frames set aside: the feed repeated itself", self.repeated_frames),
+            ("spwi_repeated_frames", "own frames set aside: the feed repeated itself", self.repeated_frames),
             (
-                "spwi_stale_peer_messages_total",
+                "spwi_stale_peer_messages",
                 "messages of peers whose feed repeats itself, left out",
                 self.stale_peer_messages,
             ),
         ];
         for (name, help, v) in counters {
-            let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} counter\n{name}{{{l}}} {v}");
+            registry.register(name, help, ConstCounter::new(v));
         }
-        let _ = writeln!(o, "# HELP spwi_agreement_same_total peer decisions equal to ours\n# TYPE spwi_agreement_same_total counter\nspwi_agreement_same_total{{{l}}} {}", self.agreement_same);
-        let _ = writeln!(o, "# HELP spwi_agreement share of peer decisions equal to ours\n# TYPE spwi_agreement gauge\nspwi_agreement{{{l}}} {}", self.agreement());
-        let _ = writeln!(o, "# HELP spwi_members live members counted, this robot included\n# TYPE spwi_members gauge\nspwi_members{{{l}}} {members}");
-        let _ = writeln!(
-            o,
-            "# HELP spwi_bad_messages_total messages refused, by reason\n# TYPE spwi_bad_messages_total counter"
+        registry.register("spwi_agreement", "share of peer decisions equal to ours", ConstGauge::new(self.agreement()));
+        registry.register("spwi_members", "live members counted, this robot included", ConstGauge::new(members as i64));
+        let stages = self.stages.iter().map(|(s, h)| (s.name().to_owned(), h.clone()));
+        registry.register(
+            "spwi_stage_seconds",
+            "time per pipeline stage",
+            ByLabel::new("stage", MetricType::Histogram, stages),
         );
-        for (reason, v) in &self.bad_messages {
-            let _ = writeln!(o, "spwi_bad_messages_total{{{l},reason=\"{}\"}} {v}", reason.label());
+    }
+}
+
+/// What the daemon counts around the engine: messages refused before it, by reason,
+/// and its own messages Zenoh held up.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct TransportCounters {
+    pub bad_messages: BTreeMap<DropReason, u64>,
+    /// Outgoing messages dropped because Zenoh held up the publisher task.
+    pub outgoing_dropped: u64,
+}
+
+impl TransportCounters {
+    pub fn bad_messages(&mut self, reason: DropReason, n: u64) {
+        *self.bad_messages.entry(reason).or_default() += n;
+    }
+
+    pub fn bad_total(&self) -> u64 {
+        self.bad_messages.values().sum()
+    }
+
+    /// Registers both counters in `registry`.
+    pub fn register(&self, registry: &mut Registry) {
+        let reasons = self.bad_messages.iter().map(|(r, &n)| (r.label().to_owned(), ConstCounter::new(n)));
+        registry.register(
+            "spwi_bad_messages",
+            "messages refused, by reason",
+            ByLabel::new("reason", MetricType::Counter, reasons),
+        );
+        registry.register(
+            "spwi_outgoing_dropped",
+            "outgoing messages dropped while Zenoh held up publishing",
+            ConstCounter::new(self.outgoing_dropped),
+        );
+    }
+}
+
+/// A scrape's registry: every metric carries the label `robot`.
+pub fn registry(robot: &str) -> Registry {
+    Registry::with_labels(std::iter::once((Cow::Borrowed("robot"), Cow::Owned(robot.to_owned()))))
+}
+
+/// The OpenMetrics text of `registry` (`/metrics`).
+pub fn exposition(registry: &Registry) -> String {
+    let mut text = String::new();
+    prometheus_client::encoding::text::encode(&mut text, registry).expect("writing to a String cannot fail");
+    text
+}
+
+/// Values of one metric by the value of one label (a reason, a stage, a peer), taken
+/// from the event loop's plain counters at scrape time: the loop keeps sole ownership
+/// and no atomics, and the metric's HELP and TYPE are written even while it is empty.
+#[derive(Debug)]
+pub struct ByLabel<M> {
+    label: &'static str,
+    kind: MetricType,
+    values: Vec<(String, M)>,
+}
+
+impl<M: EncodeMetric> ByLabel<M> {
+    pub fn new(label: &'static str, kind: MetricType, values: impl IntoIterator<Item = (String, M)>) -> Self {
+        ByLabel { label, kind, values: values.into_iter().collect() }
+    }
+}
+
+impl<M: EncodeMetric> EncodeMetric for ByLabel<M> {
+    fn encode(&self, mut encoder: MetricEncoder) -> std::fmt::Result {
+        for (value, metric) in &self.values {
+            metric.encode(encoder.encode_family(&[(self.label, value.as_str())])?)?;
         }
-        let _ = writeln!(o, "# HELP spwi_stage_seconds time per pipeline stage\n# TYPE spwi_stage_seconds histogram");
-        for (stage, h) in &self.stages {
-            h.render(&mut o, "spwi_stage_seconds", &format!("{l},stage=\"{}\",", stage.name()));
-        }
-        o
+        Ok(())
+    }
+
+    fn metric_type(&self) -> MetricType {
+        self.kind
+    }
+}
+
+impl EncodeMetric for Histogram {
+    fn encode(&self, mut encoder: MetricEncoder) -> std::fmt::Result {
+        // The last bucket has no bound: prometheus-client writes f64::MAX as +Inf.
+        let bounds = BOUNDS.iter().copied().chain(std::iter::once(f64::MAX));
+        let buckets: Vec<(f64, u64)> = bounds.zip(self.counts.iter().copied()).collect();
+        encoder.encode_histogram::<NoLabelSet>(self.sum, self.count, &buckets, None)
+    }
+
+    fn metric_type(&self) -> MetricType {
+        MetricType::Histogram
     }
 }
 
@@ -279,9 +335,15 @@ mod tests {
         let h = &m.stages[&Stage::Gcn];
         assert_eq!(h.quantile_upper_bound(0.5), Some(100e-6));
         assert_eq!(h.quantile_upper_bound(1.0), Some(1e-3));
-        m.bad_messages(DropReason::Version, 1);
-        let text = m.render("r1", 3);
-        assert!(text.contains("spwi_stage_seconds_bucket{robot=\"r1\",stage=\"gcn\",le=\"+Inf\"} 4"), "{text}");
+        let mut transport = TransportCounters::default();
+        transport.bad_messages(DropReason::Version, 1);
+        let mut registry = registry("r1");
+        m.register(&mut registry, 3);
+        transport.register(&mut registry);
+        let text = exposition(&registry);
+        assert!(text.contains("spwi_stage_seconds_bucket{robot=\"r1\",le=\"+Inf\",stage=\"gcn\"} 4"), "{text}");
+        assert!(text.contains("spwi_stage_seconds_count{robot=\"r1\",stage=\"gcn\"} 4"), "{text}");
+        assert!(text.contains("# TYPE spwi_decisions counter\nspwi_decisions_total{robot=\"r1\"} 0"), "{text}");
         assert!(text.contains("spwi_bad_messages_total{robot=\"r1\",reason=\"version\"} 1"));
         assert!(text.contains("spwi_members{robot=\"r1\"} 3"));
     }

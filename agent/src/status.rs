@@ -2,11 +2,10 @@
 //! membership change, so HTTP readers never touch the loop's state.
 
 use crate::engine::Engine;
-use crate::metrics::Metrics;
+use crate::metrics::{Metrics, TransportCounters};
 use serde::Serialize;
 use spwi_proto::{DecisionMsg, RobotId};
 use std::collections::{BTreeMap, VecDeque};
-use std::fmt::Write;
 use std::sync::{Arc, Mutex};
 
 /// Decisions kept in `/status` (10 s at 10 Hz): enough to compare robots' decisions
@@ -50,7 +49,10 @@ pub struct Status {
     /// (`crate::trust`): how often its votes and its worker estimates agreed with the
     /// others' lately.
     pub trust: BTreeMap<RobotId, f32>,
+    /// The engine's counters and stage timings.
     pub metrics: Metrics,
+    /// The daemon's: messages refused before the engine, outgoing ones dropped.
+    pub transport: TransportCounters,
 }
 
 /// Shared between the tick loop (writer) and the HTTP server (readers).
@@ -59,16 +61,17 @@ pub type SharedStatus = Arc<Mutex<Status>>;
 impl Status {
     /// Takes in the engine's state after an event that decided `decided` (or changed
     /// the members): who is live, the last decision, duplicates of our id, the feeds
-    /// set aside, trust and the counters.
-    pub fn refresh(&mut self, engine: &Engine, decided: Vec<RecentDecision>) {
+    /// set aside, trust and the counters, the daemon's too.
+    pub fn refresh(&mut self, engine: &Engine, transport: &TransportCounters, decided: Vec<RecentDecision>) {
         self.members = engine.members();
-        self.last_decision = engine.last_decision.clone();
+        self.last_decision = engine.last_decision().cloned();
         self.remember(decided);
-        self.duplicate_robot_id = engine.duplicates.iter().copied().collect();
+        self.duplicate_robot_id = engine.duplicates().iter().copied().collect();
         self.feed_stale = engine.feed_is_stale();
         self.stale_peers = engine.stale_peers();
         self.trust = engine.trust();
-        self.metrics = engine.metrics.clone();
+        self.metrics = engine.metrics().clone();
+        self.transport = transport.clone();
     }
 
     /// Appends new decisions, forgetting the oldest beyond [`RECENT_DECISIONS`].
@@ -78,29 +81,31 @@ impl Status {
         self.recent_decisions.drain(..excess);
     }
 
-    /// `/metrics`: the counters and histograms, then the state of the feeds.
+    /// `/metrics`: the counters and histograms, then the state of the feeds and trust.
     pub fn prometheus(&self) -> String {
-        let mut o = self.metrics.render(&self.robot, self.members.len());
-        let l = format!("robot=\"{}\"", self.robot);
-        let _ = writeln!(
-            o,
-            "# HELP spwi_feed_stale 1 while our camera repeats the same worker detection (set aside)\n# TYPE spwi_feed_stale gauge\nspwi_feed_stale{{{l}}} {}",
-            u8::from(self.feed_stale)
+        use crate::metrics::{exposition, registry, ByLabel};
+        use prometheus_client::metrics::gauge::ConstGauge;
+        use prometheus_client::metrics::MetricType;
+        let mut r = registry(&self.robot);
+        self.metrics.register(&mut r, self.members.len());
+        self.transport.register(&mut r);
+        r.register(
+            "spwi_feed_stale",
+            "1 while our camera repeats the same worker detection (set aside)",
+            ConstGauge::new(i64::from(self.feed_stale)),
         );
-        let _ = writeln!(
-            o,
-            "# HELP spwi_peer_feed_stale 1 for each peer whose feed repeats itself (left out)\n# TYPE spwi_peer_feed_stale gauge"
+        let stale = self.stale_peers.iter().map(|p| (p.to_string(), ConstGauge::new(1i64)));
+        r.register(
+            "spwi_peer_feed_stale",
+            "1 for each peer whose feed repeats itself (left out)",
+            ByLabel::new("peer", MetricType::Gauge, stale),
         );
-        for p in &self.stale_peers {
-            let _ = writeln!(o, "spwi_peer_feed_stale{{{l},peer=\"{p}\"}} 1");
-        }
-        let _ = writeln!(
-            o,
-            "# HELP spwi_trust trust this robot learned of each robot: how often its votes and worker estimates agreed with the others'\n# TYPE spwi_trust gauge"
+        let trust = self.trust.iter().map(|(p, &t)| (p.to_string(), ConstGauge::new(f64::from(t))));
+        r.register(
+            "spwi_trust",
+            "trust this robot learned of each robot: how often its votes and worker estimates agreed with the others'",
+            ByLabel::new("peer", MetricType::Gauge, trust),
         );
-        for (p, t) in &self.trust {
-            let _ = writeln!(o, "spwi_trust{{{l},peer=\"{p}\"}} {t}");
-        }
-        o
+        exposition(&r)
     }
 }

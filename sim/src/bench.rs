@@ -10,21 +10,14 @@
 //! (CA, the world, one identity per agent), mutual TLS and access control on every link.
 
 use crate::demo::percentile;
-use anyhow::{anyhow, bail, Context, Result};
+use crate::loopback::{layout_with_slots, usage, FleetOptions, LoopbackFleet, Usage};
+use anyhow::Result;
 use serde::Serialize;
 use spwi_agent::cli::init_tracing;
 use spwi_agent::config::LogFormat;
-use spwi_agent::fleet::authority::ThrowawayFleet;
-use spwi_agent::fleet::{secure_or_warn, Role};
-use spwi_agent::zenoh_config;
-use spwi_proto::keys::{self, Topic};
-use spwi_proto::*;
-use spwi_world::layout::Layout;
 use spwi_world::world::{Scenario, World};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 pub struct BenchOptions {
@@ -42,6 +35,17 @@ pub struct LatencyMs {
     pub p50: f64,
     pub p99: f64,
     pub max: f64,
+}
+
+impl LatencyMs {
+    /// Of latencies sorted in increasing order.
+    pub fn of(sorted: &[f64]) -> LatencyMs {
+        LatencyMs {
+            p50: percentile(sorted, 0.5),
+            p99: percentile(sorted, 0.99),
+            max: sorted.last().copied().unwrap_or(0.0),
+        }
+    }
 }
 
 /// `--json` keeps these keys.
@@ -66,171 +70,26 @@ pub struct BenchReport {
     pub bytes_per_tick_per_robot: f64,
 }
 
-#[derive(Default)]
-struct Seen {
-    /// tick → robot → (class at t, when received)
-    decisions: BTreeMap<u64, BTreeMap<RobotId, (Option<u8>, Instant)>>,
-    messages: u64,
-    bytes: u64,
-    members: usize,
-}
-
-/// A layout with at least `n` robot slots: the file's slots, repeated with a small shift.
-fn layout_with_slots(n: usize) -> Layout {
-    let mut l = Layout::default_layout();
-    let base = l.robots.clone();
-    let mut k = 1;
-    while l.robots.len() < n {
-        for s in &base {
-            if l.robots.len() == n {
-                break;
-            }
-            let mut s = s.clone();
-            let shift = 0.4 * k as f32;
-            s.spawn = [s.spawn[0] + shift * 0.5, s.spawn[1] + shift * 0.3];
-            s.patrol.iter_mut().for_each(|p| *p = [p[0] + shift * 0.5, p[1] + shift * 0.3]);
-            l.robots.push(s);
-        }
-        k += 1;
-    }
-    l
-}
-
-/// CPU seconds (user + system) and resident MB of a process, from /proc.
-fn proc_usage(pid: u32) -> Option<(f64, f64)> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
-    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let rss_kb: f64 = status.lines().find(|l| l.starts_with("VmRSS:"))?.split_whitespace().nth(1)?.parse().ok()?;
-    Some((ticks / 100.0, rss_kb / 1024.0)) // USER_HZ is 100 on Linux
-}
-
-struct Agents(Vec<Child>);
-
-impl Drop for Agents {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
 pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
-    if !o.agent.is_file() {
-        bail!("{}: no spwi-agent binary there (cargo build --release builds it; or pass --agent)", o.agent.display());
-    }
-    let fleet = FleetId::new(format!("bench{}", std::process::id()))?;
-    let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
-    // A secured bench: a throw-away fleet of the world and every agent.
-    let secured = if o.secured {
-        let members: Vec<(&str, Role)> =
-            std::iter::once(("world", Role::World)).chain(ids.iter().map(|r| (r.as_str(), Role::Robot))).collect();
-        Some(ThrowawayFleet::create("bench", &fleet, &members)?)
-    } else {
-        None
-    };
-    // The world's session is the hub the agents connect to; gossip completes the mesh.
-    let mut hub_config = zenoh_config::loopback_peer(&[])?;
-    if let Some(s) = &secured {
-        secure_or_warn(&mut hub_config, Some(&s.dir.root), "world", Role::World, "spwi-sim bench")?;
-    }
-    let session = zenoh::open(hub_config).await.map_err(|e| anyhow!("zenoh: {e}"))?;
-    let hub = session
-        .info()
-        .locators()
-        .await
-        .into_iter()
-        .next()
-        .ok_or_else(|| anyhow!("the world's session listens nowhere"))?
-        .to_string();
-    let seen = Arc::new(Mutex::new(Seen::default()));
-    let _agent_traffic = {
-        let (seen, fleet) = (seen.clone(), fleet.clone());
-        session
-            .declare_subscriber(keys::all_robot_topics(&fleet))
-            .callback(move |s| {
-                let Some((robot, topic)) = keys::parse_robot_topic(&fleet, s.key_expr().as_str()) else { return };
-                if topic == Topic::Detections {
-                    return;
-                }
-                let bytes = s.payload().to_bytes();
-                let mut st = seen.lock().expect("bench state");
-                st.messages += 1;
-                st.bytes += bytes.len() as u64;
-                if topic == Topic::Decision {
-                    if let Ok(d) = decode_from::<DecisionMsg>(&bytes, &robot) {
-                        let class = d.steps.first().map(|s| s.class);
-                        st.decisions.entry(d.tick).or_default().insert(robot, (class, Instant::now()));
-                    }
-                }
-            })
-            .await
-            .map_err(|e| anyhow!(e))?
-    };
-    let _members = {
-        let (seen, fleet) = (seen.clone(), fleet.clone());
-        session
-            .liveliness()
-            .declare_subscriber(keys::all_alive(&fleet))
-            .history(true)
-            .callback(move |s| {
-                if keys::parse_alive(&fleet, s.key_expr().as_str()).is_some() {
-                    let mut st = seen.lock().expect("bench state");
-                    if s.kind() == zenoh::sample::SampleKind::Put {
-                        st.members += 1;
-                    } else {
-                        st.members = st.members.saturating_sub(1);
-                    }
-                }
-            })
-            .await
-            .map_err(|e| anyhow!(e))?
-    };
-
-    let mut agents = Agents(Vec::new());
-    for id in &ids {
-        let mut cmd = Command::new(&o.agent);
-        cmd.args(["--robot-id", id.as_str(), "--fleet", fleet.as_str()])
-            .args(["--cfg", r#"listen/endpoints:["tcp/127.0.0.1:0"]"#])
-            .args(["--cfg", &format!(r#"connect/endpoints:["{hub}"]"#)])
-            .args(["--cfg", "scouting/multicast/enabled:false"])
-            .env("RUST_LOG", "warn,zenoh=error")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null());
-        if let Some(m) = &o.models {
-            cmd.args(["--models", &m.display().to_string()]);
-        }
-        if let Some(s) = &secured {
-            cmd.arg("--fleet-dir").arg(&s.dir.root);
-        }
-        agents.0.push(cmd.spawn().with_context(|| format!("starting {}", o.agent.display()))?);
-    }
-    let joined = Instant::now();
-    while seen.lock().expect("bench state").members < o.robots {
-        if joined.elapsed() > Duration::from_secs(30 + o.robots as u64) {
-            bail!(
-                "only {} of {} agents joined within the time allowed",
-                seen.lock().expect("bench state").members,
-                o.robots
-            );
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-
+    let fleet = LoopbackFleet::start(FleetOptions {
+        robots: o.robots,
+        agent: o.agent.clone(),
+        models: o.models.clone(),
+        secured: o.secured,
+    })
+    .await?;
     let mut world = World::new(layout_with_slots(o.robots), o.scenario, 1, o.robots);
-    let keys: Vec<String> = ids.iter().map(|id| keys::robot_topic(&fleet, id, Topic::Detections)).collect();
     let warmup = Duration::from_secs(2);
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
     let (mut cpu0, mut measure_from) = (Vec::new(), None);
     let started = Instant::now();
     let mut next = Instant::now();
+    let cpu = |fleet: &LoopbackFleet, slot| fleet.pid(slot).and_then(usage).unwrap_or_default();
     loop {
         let now = Instant::now();
         if measure_from.is_none() && now - started >= warmup {
-            cpu0 = agents.0.iter().map(|c| proc_usage(c.id()).map_or(0.0, |u| u.0)).collect();
-            let mut st = seen.lock().expect("bench state");
+            cpu0 = (0..o.robots).map(|slot| cpu(&fleet, slot).cpu_s).collect();
+            let mut st = fleet.seen.lock().expect("fleet observer");
             (st.messages, st.bytes) = (0, 0);
             measure_from = Some((now, world.tick + 1));
         }
@@ -239,18 +98,11 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         }
         world.step();
         let t = world.tick;
-        // Simulating the cameras is not the fleet's work: frames first, then the clock
-        // starts as the first one is published.
-        let frames: Vec<Vec<u8>> = ids.iter().enumerate().map(|(slot, id)| encode(&world.observe(slot, id))).collect();
-        let sent = Instant::now();
-        for (key, frame) in keys.iter().zip(frames) {
-            session.put(key, frame).await.map_err(|e| anyhow!("{key}: {e}"))?;
-        }
-        published.insert(t, sent);
+        published.insert(t, fleet.publish(&mut world).await?);
         if o.free_running {
-            let deadline = sent + Duration::from_millis(200);
+            let deadline = published[&t] + Duration::from_millis(200);
             while Instant::now() < deadline
-                && seen.lock().expect("bench state").decisions.get(&t).is_none_or(|d| d.len() < o.robots)
+                && fleet.seen.lock().expect("fleet observer").decisions.get(&t).is_none_or(|d| d.len() < o.robots)
             {
                 tokio::time::sleep(Duration::from_micros(200)).await;
             }
@@ -262,10 +114,11 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let (measured_since, first_tick) = measure_from.expect("measured");
     let elapsed = measured_since.elapsed().as_secs_f64();
     tokio::time::sleep(Duration::from_millis(300)).await; // the last decisions
-    let usage: Vec<(f64, f64)> = agents.0.iter().map(|c| proc_usage(c.id()).unwrap_or((0.0, 0.0))).collect();
-    drop(agents);
+    let usage: Vec<Usage> = (0..o.robots).map(|slot| cpu(&fleet, slot)).collect();
+    let seen = fleet.seen.clone();
+    drop(fleet);
 
-    let st = seen.lock().expect("bench state");
+    let st = seen.lock().expect("fleet observer");
     let last_tick = world.tick;
     let ticks = last_tick + 1 - first_tick;
     let (mut latencies, mut agreed, mut complete, mut incomplete) = (Vec::new(), 0u64, 0u64, 0u64);
@@ -275,10 +128,10 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
             continue;
         };
         complete += 1;
-        let last = d.values().map(|(_, at)| *at).max().expect("robots > 0");
+        let last = d.values().map(|d| d.at).max().expect("robots > 0");
         latencies.push((last - published[&t]).as_secs_f64() * 1e3);
-        let first = d.values().next().expect("robots > 0").0;
-        agreed += u64::from(d.values().all(|(c, _)| *c == first));
+        let first = d.values().next().expect("robots > 0").class;
+        agreed += u64::from(d.values().all(|d| d.class == first));
     }
     latencies.sort_by(f64::total_cmp);
     let n = o.robots as f64;
@@ -288,15 +141,11 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         secured: o.secured,
         ticks,
         ticks_per_second: ticks as f64 / elapsed,
-        latency_ms: LatencyMs {
-            p50: percentile(&latencies, 0.5),
-            p99: percentile(&latencies, 0.99),
-            max: latencies.last().copied().unwrap_or(0.0),
-        },
+        latency_ms: LatencyMs::of(&latencies),
         agreement: if complete == 0 { 0.0 } else { agreed as f64 / complete as f64 },
         incomplete_ticks: incomplete,
-        cpu_per_agent: usage.iter().zip(&cpu0).map(|((c, _), c0)| (c - c0) / elapsed).sum::<f64>() / n,
-        rss_mb_per_agent: usage.iter().map(|(_, r)| r).sum::<f64>() / n,
+        cpu_per_agent: usage.iter().zip(&cpu0).map(|(u, c0)| (u.cpu_s - c0) / elapsed).sum::<f64>() / n,
+        rss_mb_per_agent: usage.iter().map(|u| u.rss_mb).sum::<f64>() / n,
         msgs_per_tick_per_robot: st.messages as f64 / ticks as f64 / n,
         bytes_per_tick_per_robot: st.bytes as f64 / ticks as f64 / n,
     })
@@ -346,16 +195,48 @@ pub struct BenchArgs {
     /// Run the fleet secured (mutual TLS, access control), with a throw-away CA.
     #[arg(long)]
     pub secured: bool,
+    /// A soak instead of a measurement: run this long (e.g. 30m) while robots leave,
+    /// come back and freeze (see --churn); fails if the fleet did not stay up.
+    #[arg(long, value_parser = crate::demo::parse_duration)]
+    pub soak: Option<Duration>,
+    /// In a soak: how often the last robot leaves or comes back.
+    #[arg(long, default_value = "30s", value_parser = crate::demo::parse_duration)]
+    pub churn: Duration,
+    /// In a soak: how often the robot before it is frozen (SIGSTOP) for 5 s.
+    #[arg(long, default_value = "2m", value_parser = crate::demo::parse_duration)]
+    pub freeze_every: Duration,
 }
 
 /// `spwi-sim bench`: parses nothing more, runs the tool.
 pub fn main(a: BenchArgs) -> Result<()> {
-    let BenchArgs { robots, duration, free, scenario, agent, models, json, secured } = a;
+    let BenchArgs { robots, duration, free, scenario, agent, models, json, secured, soak, churn, freeze_every } = a;
     init_tracing(LogFormat::Human);
     let agent = match agent {
         Some(a) => a,
         None => std::env::current_exe()?.with_file_name("spwi-agent"),
     };
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    if let Some(duration) = soak {
+        let opts = crate::soak::SoakOptions {
+            robots: robots as usize,
+            duration,
+            churn,
+            freeze_every,
+            scenario,
+            agent,
+            models,
+            secured,
+        };
+        let report = rt.block_on(crate::soak::run(&opts))?;
+        crate::soak::print(&report);
+        if let Some(path) = json {
+            std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+        }
+        if let Some(why) = report.failure() {
+            anyhow::bail!("the fleet did not stay up: {why}");
+        }
+        return Ok(());
+    }
     let opts = crate::bench::BenchOptions {
         robots: robots as usize,
         duration,
@@ -365,30 +246,10 @@ pub fn main(a: BenchArgs) -> Result<()> {
         models,
         secured,
     };
-    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let report = rt.block_on(crate::bench::run(&opts))?;
     crate::bench::print(&report);
     if let Some(path) = json {
         std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn layouts_grow_to_any_fleet_size() {
-        assert_eq!(layout_with_slots(3).robots.len(), 8, "the file's 8 slots suffice");
-        let l = layout_with_slots(32);
-        assert_eq!(l.robots.len(), 32);
-        assert_ne!(l.robots[8].spawn, l.robots[0].spawn);
-    }
-
-    #[test]
-    fn proc_usage_reads_this_process() {
-        let (cpu, rss) = proc_usage(std::process::id()).unwrap();
-        assert!(cpu >= 0.0 && rss > 1.0, "{cpu} s, {rss} MB");
-    }
 }

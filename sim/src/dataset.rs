@@ -33,7 +33,6 @@ use spwi_proto::{RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASS
 use spwi_world::generate::NamedLayout;
 use spwi_world::world::{Scenario, World};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 /// Future ticks of truth stored with every row.
 pub const FUTURE: usize = 30;
@@ -164,8 +163,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     let mut gcn = o.gcn.as_ref().map(|file| Gcn::load(file, n, Backend::Tract, None)).transpose()?;
     let mut graph = GraphBuilder::new(n, o.edge_weight);
     let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("r{i}"))).collect::<Result<_, _>>()?;
-    let started = Instant::now();
-    let mut last_report = 0;
+    let progress = crate::progress::Progress::new("episodes exported", o.episodes as u64, 5);
     for e in 0..o.episodes {
         let floor = &o.floors[e as usize % o.floors.len()].layout;
         let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
@@ -266,13 +264,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 }
             }
         }
-        let pct = (e + 1) * 100 / o.episodes;
-        if pct >= last_report + 5 || e + 1 == o.episodes {
-            last_report = pct;
-            let el = started.elapsed().as_secs_f64();
-            let eta = el / (e + 1) as f64 * (o.episodes - e - 1) as f64;
-            eprintln!("[{:>3}%] {} / {} episodes, {:.0} s elapsed, ~{:.0} s to go", pct, e + 1, o.episodes, el, eta);
-        }
+        progress.inc();
     }
     let samples = sp.label.rows();
     let rows = tp.tick.rows();

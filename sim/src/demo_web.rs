@@ -1,19 +1,28 @@
 //! The demo's live page (`spwi-sim demo --http ADDR`): plain HTML, CSS and JS shipped
 //! in the binary (`sim/web/index.html`, no npm build), the floor plan at `/layout`, and
 //! the fleet's state pushed as server-sent events at `/events` a few times a second.
-//! Like the agent's status server, a minimal HTTP/1.1 server on tokio: three GET routes
-//! do not need a framework.
+//! Served by axum, like the agent's status endpoints.
 
 use anyhow::Result;
+use axum::extract::State;
+use axum::http::{header, StatusCode};
+use axum::response::sse::{Event, Sse};
+use axum::response::{Html, IntoResponse};
+use axum::routing::get;
+use axum::Router;
+use futures_util::stream::{self, StreamExt};
+use std::convert::Infallible;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use tokio::io::AsyncWriteExt;
-use tokio::net::{TcpListener, TcpStream};
+use std::time::Duration;
+use tokio::net::TcpListener;
 use tokio::sync::{broadcast, watch};
 
 const PAGE: &str = include_str!("../web/index.html");
 /// How long one server-sent-events response lasts before the browser reconnects.
-const STREAM_FOR: std::time::Duration = std::time::Duration::from_secs(1);
+const STREAM_FOR: Duration = Duration::from_secs(1);
+/// How soon the browser reconnects after a response ends.
+const RECONNECT: Duration = Duration::from_millis(200);
 
 /// Shared between the demo loop (publisher) and the connections.
 pub struct Web {
@@ -38,7 +47,8 @@ impl Web {
     }
 }
 
-/// Binds `addr`; returns the bound address and the serving future.
+/// Binds `addr`; returns the bound address and the serving future, which ends when
+/// `stop` changes.
 pub async fn serve(
     addr: SocketAddr,
     web: Arc<Web>,
@@ -46,57 +56,47 @@ pub async fn serve(
 ) -> Result<(SocketAddr, impl std::future::Future<Output = ()>)> {
     let listener = TcpListener::bind(addr).await.map_err(|e| anyhow::anyhow!("--http {addr}: {e}"))?;
     let bound = listener.local_addr()?;
+    let app = Router::new()
+        .route("/", get(|| async { Html(PAGE) }))
+        .route("/index.html", get(|| async { Html(PAGE) }))
+        .route(
+            "/layout",
+            get(|State(web): State<Arc<Web>>| async move {
+                ([(header::CONTENT_TYPE, "application/json")], web.layout.clone())
+            }),
+        )
+        .route("/events", get(events))
+        .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })
+        .with_state(web);
     Ok((bound, async move {
-        loop {
-            tokio::select! {
-                _ = stop.changed() => break,
-                Ok((stream, _)) = listener.accept() => {
-                    let (web, stop) = (web.clone(), stop.clone());
-                    tokio::spawn(async move { let _ = answer(stream, web, stop).await; });
-                }
-            }
+        let stop = async move {
+            let _ = stop.changed().await;
+        };
+        if let Err(e) = axum::serve(listener, app).with_graceful_shutdown(stop).await {
+            tracing::warn!("demo page server on {bound} stopped: {e}");
         }
     }))
 }
 
-async fn answer(mut stream: TcpStream, web: Arc<Web>, mut stop: watch::Receiver<bool>) -> std::io::Result<()> {
-    let (_, path) = spwi_agent::http::read_request(&mut stream).await?;
-    let reply = |code: &str, kind: &str, body: &str| {
-        format!(
-            "HTTP/1.1 {code}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
-            body.len()
-        )
-    };
-    match path.as_str() {
-        "/" | "/index.html" => stream.write_all(reply("200 OK", "text/html; charset=utf-8", PAGE).as_bytes()).await?,
-        "/layout" => stream.write_all(reply("200 OK", "application/json", &web.layout).as_bytes()).await?,
-        "/events" => {
-            stream
-                .write_all(b"HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\nConnection: keep-alive\r\n\r\n")
-                .await?;
-            // Each response streams for a few seconds, then ends; the browser reconnects
-            // after `retry` ms. A stream that never ends would keep headless browsers
-            // (and some proxies) waiting for the page to finish loading.
-            stream.write_all(b"retry: 200\n\n").await?;
-            let mut rx = web.events.subscribe();
-            let first = web.latest.lock().ok().and_then(|l| l.clone());
-            if let Some(s) = first {
-                stream.write_all(format!("data: {s}\n\n").as_bytes()).await?;
-            }
-            let until = tokio::time::Instant::now() + STREAM_FOR;
-            loop {
-                tokio::select! {
-                    _ = stop.changed() => break,
-                    _ = tokio::time::sleep_until(until) => break,
-                    msg = rx.recv() => match msg {
-                        Ok(s) => stream.write_all(format!("data: {s}\n\n").as_bytes()).await?,
-                        Err(broadcast::error::RecvError::Lagged(_)) => continue,
-                        Err(broadcast::error::RecvError::Closed) => break,
-                    },
-                }
+/// The latest state, then every new one for [`STREAM_FOR`]; then the response ends and
+/// the browser reconnects. A stream that never ends would keep headless browsers (and
+/// some proxies) waiting for the page to finish loading.
+async fn events(State(web): State<Arc<Web>>) -> impl IntoResponse {
+    let until = tokio::time::Instant::now() + STREAM_FOR;
+    let latest = web.latest.lock().ok().and_then(|l| l.clone());
+    let head = stream::iter(std::iter::once(Event::default().retry(RECONNECT)).chain(latest.map(data)));
+    let live = stream::unfold(web.events.subscribe(), move |mut rx| async move {
+        loop {
+            match tokio::time::timeout_at(until, rx.recv()).await.ok()? {
+                Ok(s) => return Some((data(s), rx)),
+                Err(broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(broadcast::error::RecvError::Closed) => return None,
             }
         }
-        _ => stream.write_all(reply("404 Not Found", "text/plain", "not found\n").as_bytes()).await?,
-    }
-    stream.shutdown().await
+    });
+    Sse::new(head.chain(live).map(Ok::<_, Infallible>))
+}
+
+fn data(state: Arc<String>) -> Event {
+    Event::default().data(state.as_str())
 }

@@ -7,10 +7,13 @@
 //! dataset.rs    `spwi-sim dataset`: training data (.npy), graphs built by the agent's code
 //! eval/         `spwi-sim eval`: the paper's tables on held-out episodes, the agent's code
 //! npy.rs        a streaming .npy writer
+//! progress.rs   progress of long jobs: a bar on a terminal, plain lines in logs
 //! render.rs     `spwi-sim render`: a top-down PNG and each camera's detections
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
 //! faulty_camera.rs cameras that lie: frozen on one frame, or looping an old clip
 //! bench.rs      `spwi-sim bench`: N agent processes over Zenoh; latency, CPU, memory
+//! soak.rs       `spwi-sim bench --soak`: the same fleet for long, robots leaving and freezing
+//! loopback.rs   the fleet of agent processes around the world's hub session, for both
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
 //! world_args.rs the world every tool runs in (scenario, floors, cameras)
@@ -26,8 +29,11 @@ pub mod demo_web;
 pub mod eval;
 pub mod faulty_camera;
 pub mod layout;
+pub mod loopback;
 pub mod npy;
+pub mod progress;
 pub mod render;
 pub mod service;
+pub mod soak;
 pub mod stats;
 pub mod world_args;

@@ -1,7 +1,10 @@
 //! Test harness: a hub session on an ephemeral loopback port, a scripted detection
 //! publisher, agents in-process (each with its own Zenoh session) or as real processes,
 //! and a collector of the decisions every agent publishes. Multicast scouting is off;
-//! gossip completes the mesh. Every wait has a timeout.
+//! gossip completes the mesh. Every wait has a timeout. `netns` builds a network of
+//! namespaces whose links drop real packets.
+
+pub mod netns;
 
 use anyhow::{anyhow, Context, Result};
 use spwi_agent::config::AgentConfig;
@@ -60,7 +63,14 @@ pub struct Hub {
 
 impl Hub {
     pub async fn start(fleet: &str) -> Result<Hub> {
-        let session = zenoh::open(zenoh_config::loopback_peer(&[])?).await.map_err(|e| anyhow!(e))?;
+        Self::start_listening(fleet, "tcp/127.0.0.1:0").await
+    }
+
+    /// A hub listening on `endpoint` (e.g. an address on a test network's bridge).
+    pub async fn start_listening(fleet: &str, endpoint: &str) -> Result<Hub> {
+        let mut config = zenoh_config::loopback_peer(&[])?;
+        config.insert_json5("listen/endpoints", &serde_json::to_string(&[endpoint])?).map_err(|e| anyhow!(e))?;
+        let session = zenoh::open(config).await.map_err(|e| anyhow!(e))?;
         let locator = session.info().locators().await.into_iter().next().context("hub listens nowhere")?.to_string();
         Ok(Hub { session, locator, fleet: FleetId::new(fleet)?, fleet_dir: None })
     }
@@ -243,6 +253,23 @@ impl Collector {
         }
     }
 
+    /// Over ticks `from..=to`: the share of ticks every robot of `robots` decided on
+    /// which they all named the same intent at every step, and how many ticks every
+    /// robot decided.
+    pub fn agreement(&self, robots: &[RobotId], from: u64, to: u64) -> (f64, usize) {
+        let by = self.by_robot();
+        let (mut same, mut common) = (0, 0);
+        for t in from..=to {
+            let Some(ds) = robots.iter().map(|r| by.get(r).and_then(|m| m.get(&t))).collect::<Option<Vec<_>>>() else {
+                continue;
+            };
+            common += 1;
+            let classes = |d: &DecisionMsg| d.steps.iter().map(|s| s.class).collect::<Vec<_>>();
+            same += usize::from(ds.iter().all(|d| classes(d) == classes(ds[0])));
+        }
+        (if common == 0 { 0.0 } else { same as f64 / common as f64 }, common)
+    }
+
     /// The longest run of consecutive ticks in `from..=to` that `robot` did not decide.
     pub fn longest_gap(&self, robot: &RobotId, from: u64, to: u64) -> u64 {
         let by = self.by_robot();
@@ -313,12 +340,18 @@ pub struct ProcessAgent {
 impl ProcessAgent {
     /// `exe` is `env!("CARGO_BIN_EXE_spwi-test-agent")`, known only to the test files.
     pub fn start(exe: &str, hub: &Hub, robot: &RobotId) -> ProcessAgent {
-        let child = Command::new(exe)
+        Self::start_with(Command::new(exe), hub, robot, "tcp/127.0.0.1:0")
+    }
+
+    /// Starts the agent `command` runs (the agent itself, or a wrapper that ends by
+    /// executing it, as `ip netns exec` does), listening on `listen`.
+    pub fn start_with(mut command: Command, hub: &Hub, robot: &RobotId, listen: &str) -> ProcessAgent {
+        let child = command
             .args(["--robot-id", robot.as_str(), "--fleet", hub.fleet.as_str()])
             .arg("--models")
             .arg(models_dir())
             .args(["--cfg", "mode:\"peer\""])
-            .args(["--cfg", "listen/endpoints:[\"tcp/127.0.0.1:0\"]"])
+            .args(["--cfg", &format!("listen/endpoints:[\"{listen}\"]")])
             .args(["--cfg", &format!("connect/endpoints:[\"{}\"]", hub.locator)])
             .args(["--cfg", "scouting/multicast/enabled:false"])
             .env("RUST_LOG", "warn")

@@ -129,10 +129,10 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
         tokio::time::sleep(Duration::from_secs(1)).await;
         let tick1 = publisher.current_tick();
         let status = a.started.status.lock().unwrap().clone();
-        let bad = status.metrics.bad_total();
+        let bad = status.transport.bad_total();
         // a reads its own detections and everyone's embedding, vote and decision keys:
         // 7 bad payloads on 2 robots' keys for 3 topics + on its own detections.
-        assert!(bad >= 7 * 7, "only {bad} bad messages counted: {:?}", status.metrics.bad_messages);
+        assert!(bad >= 7 * 7, "only {bad} bad messages counted: {:?}", status.transport.bad_messages);
         for reason in [
             DropReason::Malformed,
             DropReason::Version,
@@ -141,9 +141,9 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             DropReason::RobotMismatch,
         ] {
             assert!(
-                status.metrics.bad_messages.get(&reason).copied().unwrap_or(0) > 0,
+                status.transport.bad_messages.get(&reason).copied().unwrap_or(0) > 0,
                 "no {reason:?}: {:?}",
-                status.metrics.bad_messages
+                status.transport.bad_messages
             );
         }
         for r in &ids {

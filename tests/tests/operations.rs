@@ -10,9 +10,14 @@ use std::time::{Duration, Instant};
 const EXE: &str = env!("CARGO_BIN_EXE_spwi-test-agent");
 
 fn get(addr: std::net::SocketAddr, path: &str) -> (u16, String) {
+    request(addr, "GET", path)
+}
+
+/// One request on its own connection; returns the status code and the body.
+fn request(addr: std::net::SocketAddr, method: &str, path: &str) -> (u16, String) {
     let mut s = std::net::TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
-    write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    write!(s, "{method} {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").unwrap();
     let mut text = String::new();
     s.read_to_string(&mut text).unwrap();
     let code = text.split_whitespace().nth(1).unwrap().parse().unwrap();
@@ -68,6 +73,10 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         }
         let (code, _) = tokio::task::spawn_blocking(move || get(addr, "/nope")).await.unwrap();
         assert_eq!(code, 404);
+        let (code, body) = tokio::task::spawn_blocking(move || request(addr, "HEAD", "/healthz")).await.unwrap();
+        assert_eq!((code, body.as_str()), (200, ""), "HEAD answers like GET, without the body");
+        let (code, _) = tokio::task::spawn_blocking(move || request(addr, "POST", "/status")).await.unwrap();
+        assert_eq!(code, 405, "the endpoints only read");
         a.stop().await;
         b.stop().await;
     });

@@ -19,7 +19,7 @@ mod publishing;
 
 use crate::config::AgentConfig;
 use crate::engine::{Engine, EngineConfig, Input, Output};
-use crate::metrics::DropReason;
+use crate::metrics::{DropReason, TransportCounters};
 use crate::model::ModelSet;
 use crate::record::{PeerState, RecordedConfig, Recorder};
 use crate::status::{RecentDecision, SharedStatus, Status};
@@ -104,7 +104,8 @@ pub async fn run(
         feed_stale: false,
         stale_peers: Vec::new(),
         trust: Default::default(),
-        metrics: engine.metrics.clone(),
+        metrics: engine.metrics().clone(),
+        transport: TransportCounters::default(),
     }));
     let mut http_task = None;
     let mut http_addr = None;
@@ -123,6 +124,7 @@ pub async fn run(
     let start = Instant::now();
     let mut bad_log = RateLimitedLog::new(Duration::from_secs(5));
     let mut slow_log = RateLimitedLog::new(Duration::from_secs(5));
+    let mut transport = TransportCounters::default();
     loop {
         let deadline = engine.next_deadline().map(|d| tokio::time::Instant::from_std(start + d));
         let mut input = tokio::select! {
@@ -136,7 +138,7 @@ pub async fn run(
                 Some(Message { topic, robot: r, bytes }) => match decode_input(topic, &r, &bytes) {
                     Ok(i) => i,
                     Err(e) => {
-                        engine.metrics.bad_messages(DropReason::from(&e), 1);
+                        transport.bad_messages(DropReason::from(&e), 1);
                         bad_log.warn(|| format!("dropped a bad message on {}'s {}: {e}", r, topic.as_str()));
                         continue;
                     }
@@ -147,7 +149,7 @@ pub async fn run(
         if let Some(s) = signed_votes.as_mut() {
             let forged = s.check(&mut input);
             if forged > 0 {
-                engine.metrics.bad_messages(DropReason::ForgedRelayedVote, forged as u64);
+                transport.bad_messages(DropReason::ForgedRelayedVote, forged as u64);
                 bad_log.warn(|| format!("dropped {forged} relayed vote(s) without their origin's signature"));
             }
         }
@@ -188,11 +190,11 @@ pub async fn run(
         if !decided.is_empty() || membership_change {
             let lost = conn.overflow.swap(0, Ordering::Relaxed);
             if lost > 0 {
-                engine.metrics.bad_messages(DropReason::QueueFull, lost);
+                transport.bad_messages(DropReason::QueueFull, lost);
             }
-            engine.metrics.outgoing_dropped += outbox.take_dropped();
+            transport.outgoing_dropped += outbox.take_dropped();
             if let Ok(mut s) = status.lock() {
-                s.refresh(&engine, decided);
+                s.refresh(&engine, &transport, decided);
             }
         }
     }

@@ -257,6 +257,7 @@ static EMPTY: Tally = Tally::EMPTY;
 /// Every episode's tallies, in episode order, computed on every core.
 fn run_episodes(o: &EvalOptions) -> Result<Vec<fleet::Tallies>> {
     let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, o.episodes.max(1) as usize);
+    let progress = &crate::progress::Progress::new("episodes evaluated", u64::from(o.episodes), 0);
     let done: Vec<Result<Vec<(u32, fleet::Tallies)>>> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..workers)
             .map(|w| {
@@ -265,9 +266,10 @@ fn run_episodes(o: &EvalOptions) -> Result<Vec<fleet::Tallies>> {
                         .step_by(workers)
                         .map(|e| {
                             let floor = &o.floors[e as usize % o.floors.len()];
-                            fleet::episode(o, &floor.layout, episode_seed(o.seed, e))
-                                .with_context(|| format!("episode {e} on floor {}", floor.name))
-                                .map(|t| (e, t))
+                            let tallies = fleet::episode(o, &floor.layout, episode_seed(o.seed, e))
+                                .with_context(|| format!("episode {e} on floor {}", floor.name));
+                            progress.inc();
+                            tallies.map(|t| (e, t))
                         })
                         .collect()
                 })

@@ -1,0 +1,318 @@
+//! A fleet of real `spwi-agent` processes on one machine, for `spwi-sim bench` and its
+//! soak: the simulated world's session is the hub every agent connects to (gossip
+//! completes the mesh), and it observes what the agents publish (decisions, message and
+//! byte counts) and who holds a liveliness token. Agents can be stopped, started again
+//! and frozen; their CPU, memory and open files are read from /proc.
+
+use anyhow::{anyhow, bail, Context, Result};
+use spwi_agent::fleet::authority::ThrowawayFleet;
+use spwi_agent::fleet::{secure_or_warn, Role};
+use spwi_agent::zenoh_config;
+use spwi_proto::keys::{self, Topic};
+use spwi_proto::*;
+use spwi_world::layout::Layout;
+use spwi_world::world::World;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// How the fleet is made up.
+pub struct FleetOptions {
+    pub robots: usize,
+    /// The spwi-agent binary.
+    pub agent: PathBuf,
+    /// Model set folder for the agents (default: theirs).
+    pub models: Option<PathBuf>,
+    /// Mutual TLS and access control on every link, with a throw-away CA.
+    pub secured: bool,
+}
+
+/// One robot's decision as the hub received it.
+#[derive(Debug, Clone, Copy)]
+pub struct Decided {
+    /// The team's class at t; `None` when no member saw the worker.
+    pub class: Option<u8>,
+    pub at: Instant,
+    /// Live members the robot counted, itself included.
+    pub live_members: u32,
+}
+
+/// What the hub has seen of the agents.
+#[derive(Default)]
+pub struct Seen {
+    /// tick → robot → its decision
+    pub decisions: BTreeMap<u64, BTreeMap<RobotId, Decided>>,
+    /// Messages and bytes the agents published (detections excluded).
+    pub messages: u64,
+    pub bytes: u64,
+    /// Robots holding a liveliness token.
+    pub members: usize,
+}
+
+pub struct LoopbackFleet {
+    pub fleet: FleetId,
+    pub ids: Vec<RobotId>,
+    pub session: zenoh::Session,
+    pub seen: Arc<Mutex<Seen>>,
+    hub: String,
+    options: FleetOptions,
+    secured: Option<ThrowawayFleet>,
+    /// One slot per robot; `None` while its agent is stopped.
+    agents: Vec<Option<Child>>,
+    detection_keys: Vec<String>,
+    _traffic: zenoh::pubsub::Subscriber<()>,
+    _members: zenoh::pubsub::Subscriber<()>,
+}
+
+impl LoopbackFleet {
+    /// Opens the hub, starts every agent and waits until all hold their tokens.
+    pub async fn start(options: FleetOptions) -> Result<LoopbackFleet> {
+        if !options.agent.is_file() {
+            bail!(
+                "{}: no spwi-agent binary there (cargo build --release builds it; or pass --agent)",
+                options.agent.display()
+            );
+        }
+        let fleet = FleetId::new(format!("bench{}", std::process::id()))?;
+        let ids: Vec<RobotId> = (0..options.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
+        let secured = if options.secured {
+            let members: Vec<(&str, Role)> =
+                std::iter::once(("world", Role::World)).chain(ids.iter().map(|r| (r.as_str(), Role::Robot))).collect();
+            Some(ThrowawayFleet::create("bench", &fleet, &members)?)
+        } else {
+            None
+        };
+        let mut hub_config = zenoh_config::loopback_peer(&[])?;
+        if let Some(s) = &secured {
+            secure_or_warn(&mut hub_config, Some(&s.dir.root), "world", Role::World, "spwi-sim bench")?;
+        }
+        let session = zenoh::open(hub_config).await.map_err(|e| anyhow!("zenoh: {e}"))?;
+        let hub = session
+            .info()
+            .locators()
+            .await
+            .into_iter()
+            .next()
+            .ok_or_else(|| anyhow!("the world's session listens nowhere"))?
+            .to_string();
+        let seen = Arc::new(Mutex::new(Seen::default()));
+        let traffic = {
+            let (seen, fleet) = (seen.clone(), fleet.clone());
+            session
+                .declare_subscriber(keys::all_robot_topics(&fleet))
+                .callback(move |s| {
+                    let Some((robot, topic)) = keys::parse_robot_topic(&fleet, s.key_expr().as_str()) else {
+                        return;
+                    };
+                    if topic == Topic::Detections {
+                        return;
+                    }
+                    let bytes = s.payload().to_bytes();
+                    let mut st = seen.lock().expect("fleet observer");
+                    st.messages += 1;
+                    st.bytes += bytes.len() as u64;
+                    if topic == Topic::Decision {
+                        if let Ok(d) = decode_from::<DecisionMsg>(&bytes, &robot) {
+                            let class = d.steps.first().map(|s| s.class);
+                            let decided = Decided { class, at: Instant::now(), live_members: d.live_members };
+                            st.decisions.entry(d.tick).or_default().insert(robot, decided);
+                        }
+                    }
+                })
+                .await
+                .map_err(|e| anyhow!(e))?
+        };
+        let members = {
+            let (seen, fleet) = (seen.clone(), fleet.clone());
+            session
+                .liveliness()
+                .declare_subscriber(keys::all_alive(&fleet))
+                .history(true)
+                .callback(move |s| {
+                    if keys::parse_alive(&fleet, s.key_expr().as_str()).is_some() {
+                        let mut st = seen.lock().expect("fleet observer");
+                        if s.kind() == zenoh::sample::SampleKind::Put {
+                            st.members += 1;
+                        } else {
+                            st.members = st.members.saturating_sub(1);
+                        }
+                    }
+                })
+                .await
+                .map_err(|e| anyhow!(e))?
+        };
+        let detection_keys = ids.iter().map(|id| keys::robot_topic(&fleet, id, Topic::Detections)).collect();
+        let mut f = LoopbackFleet {
+            agents: (0..ids.len()).map(|_| None).collect(),
+            fleet,
+            ids,
+            session,
+            seen,
+            hub,
+            options,
+            secured,
+            detection_keys,
+            _traffic: traffic,
+            _members: members,
+        };
+        for slot in 0..f.ids.len() {
+            f.start_agent(slot)?;
+        }
+        let n = f.ids.len();
+        f.wait_members(n, Duration::from_secs(30 + n as u64)).await?;
+        Ok(f)
+    }
+
+    /// Starts the agent of `slot` (it must be stopped).
+    pub fn start_agent(&mut self, slot: usize) -> Result<()> {
+        assert!(self.agents[slot].is_none(), "agent {slot} is running");
+        let id = &self.ids[slot];
+        let mut cmd = Command::new(&self.options.agent);
+        cmd.args(["--robot-id", id.as_str(), "--fleet", self.fleet.as_str()])
+            .args(["--cfg", r#"listen/endpoints:["tcp/127.0.0.1:0"]"#])
+            .args(["--cfg", &format!(r#"connect/endpoints:["{}"]"#, self.hub)])
+            .args(["--cfg", "scouting/multicast/enabled:false"])
+            .env("RUST_LOG", "warn,zenoh=error")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null());
+        if let Some(m) = &self.options.models {
+            cmd.arg("--models").arg(m);
+        }
+        if let Some(s) = &self.secured {
+            cmd.arg("--fleet-dir").arg(&s.dir.root);
+        }
+        let child = cmd.spawn().with_context(|| format!("starting {}", self.options.agent.display()))?;
+        self.agents[slot] = Some(child);
+        Ok(())
+    }
+
+    /// Stops the agent of `slot` as an operator would (SIGTERM: it leaves the fleet
+    /// cleanly) and waits for it to exit.
+    pub async fn stop_agent(&mut self, slot: usize) -> Result<()> {
+        let mut child = self.agents[slot].take().with_context(|| format!("agent {slot} is not running"))?;
+        signal(child.id(), "TERM")?;
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while child.try_wait()?.is_none() {
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                bail!("{} did not exit within 10 s of SIGTERM", self.ids[slot]);
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        Ok(())
+    }
+
+    /// Sends `sig` (e.g. "STOP", "CONT") to the running agent of `slot`.
+    pub fn signal_agent(&self, slot: usize, sig: &str) -> Result<()> {
+        let child = self.agents[slot].as_ref().with_context(|| format!("agent {slot} is not running"))?;
+        signal(child.id(), sig)
+    }
+
+    /// The process id of the agent of `slot`, if running.
+    pub fn pid(&self, slot: usize) -> Option<u32> {
+        self.agents[slot].as_ref().map(Child::id)
+    }
+
+    /// Waits until `n` robots hold their liveliness tokens.
+    pub async fn wait_members(&self, n: usize, limit: Duration) -> Result<()> {
+        let since = Instant::now();
+        while self.seen.lock().expect("fleet observer").members != n {
+            if since.elapsed() > limit {
+                let members = self.seen.lock().expect("fleet observer").members;
+                bail!("{members} agents hold a token, {n} expected within {limit:?}");
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        Ok(())
+    }
+
+    /// Publishes the world's frames of its current tick to every robot slot; returns
+    /// when the first was published (simulating the cameras is not the fleet's work).
+    pub async fn publish(&self, world: &mut World) -> Result<Instant> {
+        let frames: Vec<Vec<u8>> =
+            self.ids.iter().enumerate().map(|(slot, id)| encode(&world.observe(slot, id))).collect();
+        let sent = Instant::now();
+        for (key, frame) in self.detection_keys.iter().zip(frames) {
+            self.session.put(key, frame).await.map_err(|e| anyhow!("{key}: {e}"))?;
+        }
+        Ok(sent)
+    }
+}
+
+impl Drop for LoopbackFleet {
+    fn drop(&mut self) {
+        for c in self.agents.iter_mut().flatten() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+fn signal(pid: u32, sig: &str) -> Result<()> {
+    let ok = Command::new("kill").args([&format!("-{sig}"), &pid.to_string()]).status()?.success();
+    if !ok {
+        bail!("kill -{sig} {pid} failed");
+    }
+    Ok(())
+}
+
+/// A layout with at least `n` robot slots: the file's slots, repeated with a small shift.
+pub fn layout_with_slots(n: usize) -> Layout {
+    let mut l = Layout::default_layout();
+    let base = l.robots.clone();
+    let mut k = 1;
+    while l.robots.len() < n {
+        for s in &base {
+            if l.robots.len() == n {
+                break;
+            }
+            let mut s = s.clone();
+            let shift = 0.4 * k as f32;
+            s.spawn = [s.spawn[0] + shift * 0.5, s.spawn[1] + shift * 0.3];
+            s.patrol.iter_mut().for_each(|p| *p = [p[0] + shift * 0.5, p[1] + shift * 0.3]);
+            l.robots.push(s);
+        }
+        k += 1;
+    }
+    l
+}
+
+/// A process's use of the machine, from /proc.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Usage {
+    /// CPU seconds, user and system.
+    pub cpu_s: f64,
+    pub rss_mb: f64,
+    pub open_files: usize,
+}
+
+pub fn usage(pid: u32) -> Option<Usage> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let rss_kb: f64 = status.lines().find(|l| l.starts_with("VmRSS:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    let open_files = std::fs::read_dir(format!("/proc/{pid}/fd")).ok()?.count();
+    Some(Usage { cpu_s: ticks / 100.0, rss_mb: rss_kb / 1024.0, open_files }) // USER_HZ is 100 on Linux
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layouts_grow_to_any_fleet_size() {
+        assert_eq!(layout_with_slots(3).robots.len(), 8, "the file's 8 slots suffice");
+        let l = layout_with_slots(32);
+        assert_eq!(l.robots.len(), 32);
+        assert_ne!(l.robots[8].spawn, l.robots[0].spawn);
+    }
+
+    #[test]
+    fn usage_reads_this_process() {
+        let u = usage(std::process::id()).unwrap();
+        assert!(u.cpu_s >= 0.0 && u.rss_mb > 1.0 && u.open_files >= 3, "{u:?}");
+    }
+}
