@@ -84,12 +84,16 @@ fn bench_backend(backend: Backend) {
     measure("star graph (12 objects)", 20_000, || {
         black_box(graph.build(black_box(&f)));
     });
-    let g = graph.build(&f).unwrap().clone();
     let mut ego = set.inference(TemporalModel::Ego).unwrap();
     let mut col = set.inference(TemporalModel::Collective).unwrap();
-    measure("GCN", 3_000, || {
-        black_box(ego.gcn(black_box(&g)).unwrap());
-    });
+    // The simulated floors show one to three objects beside the worker; 12 is a crowded
+    // view. A GCN that names its node count is fed only the real nodes (m.gcn_nodes()).
+    for objects in [3, 12] {
+        let g = graph.build(&frame(1, objects)).unwrap().clone();
+        measure(&format!("GCN ({objects} objects, {:?})", m.gcn_nodes()), 3_000, || {
+            black_box(ego.gcn(black_box(&g)).unwrap());
+        });
+    }
     let ego_in = vec![0.1f32; m.frames() * TemporalModel::Ego.row_dim(m.row)];
     let col_in = vec![0.1f32; m.frames() * TemporalModel::Collective.row_dim(m.row)];
     measure("ego-GRU", 3_000, || {
@@ -127,13 +131,15 @@ fn bench_backend(backend: Backend) {
         set.inference(TemporalModel::Collective).unwrap(),
     );
     let mut tick = 0u64;
-    let template = frame(0, 12);
-    measure("whole tick (frame → decision, alone)", 3_000, || {
-        tick += 1;
-        let mut f = template.clone(); // a 29 kB copy, as a received frame would be
-        f.tick = tick;
-        black_box(engine.handle(Input::Frame(f), Duration::from_millis(tick * 100)));
-    });
+    for objects in [3, 12] {
+        let template = frame(0, objects);
+        measure(&format!("whole tick ({objects} objects, alone)"), 3_000, || {
+            tick += 1;
+            let mut f = template.clone(); // a copy, as a received frame would be
+            f.tick = tick;
+            black_box(engine.handle(Input::Frame(f), Duration::from_millis(tick * 100)));
+        });
+    }
 }
 
 fn bench_codec() {

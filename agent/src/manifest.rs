@@ -14,11 +14,58 @@ use serde::{Deserialize, Serialize};
 use spwi_proto::{EMBEDDING_DIM, NUM_CLASSES};
 use std::path::{Path, PathBuf};
 use tract_onnx::prelude::*;
+use tract_onnx::tract_hir::infer::Factoid;
 
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TensorSpec {
     pub name: String,
-    pub shape: Vec<usize>,
+    pub shape: Vec<Dim>,
+}
+
+impl TensorSpec {
+    /// The shape, when every dimension is a size.
+    pub fn fixed_shape(&self) -> Option<Vec<usize>> {
+        self.shape.iter().map(|d| if let Dim::Fixed(n) = d { Some(*n) } else { None }).collect()
+    }
+}
+
+/// One dimension of a tensor: a size, or a name where the file leaves the size to
+/// each run (only the GCN's node count may be left so: see [`GcnNodes`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Dim {
+    Fixed(usize),
+    Named(String),
+}
+
+impl Dim {
+    /// Fixed dimensions, from sizes.
+    pub fn fixed(sizes: &[usize]) -> Vec<Dim> {
+        sizes.iter().map(|&n| Dim::Fixed(n)).collect()
+    }
+}
+
+/// A shape as people write it: `[1, nodes, 1024]`.
+fn shown(shape: &[Dim]) -> String {
+    let dims: Vec<String> = shape
+        .iter()
+        .map(|d| match d {
+            Dim::Fixed(n) => n.to_string(),
+            Dim::Named(s) => s.clone(),
+        })
+        .collect();
+    format!("[{}]", dims.join(", "))
+}
+
+/// How the GCN is fed a graph.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GcnNodes {
+    /// Every graph padded to this many nodes (the file fixes its node count).
+    Padded(usize),
+    /// Only the graph's real nodes (the file names its node count): the products of
+    /// both layers shrink with the graph, and the worker node's output is the same,
+    /// since padding nodes have no edge to it.
+    Real,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -32,13 +79,15 @@ pub struct ModelSpec {
 }
 
 impl ModelSpec {
-    /// The GCN interface the daemon feeds for graphs of `max_nodes` nodes.
-    pub fn gcn(max_nodes: usize) -> ModelSpec {
-        let t = |name: &str, shape: &[usize]| TensorSpec { name: name.into(), shape: shape.to_vec() };
+    /// The GCN interface the daemon feeds for graphs of `nodes` nodes (a size, or the
+    /// name of a node count left to each run).
+    pub fn gcn(nodes: Dim) -> ModelSpec {
+        let t = |name: &str, shape: Vec<Dim>| TensorSpec { name: name.into(), shape };
+        let (f, n) = (Dim::Fixed(NODE_FEATURE_DIM), nodes);
         ModelSpec {
             file: "gcn.onnx".into(),
-            inputs: vec![t("x", &[1, max_nodes, NODE_FEATURE_DIM]), t("adj", &[1, max_nodes, max_nodes])],
-            outputs: vec![t("embedding", &[1, EMBEDDING_DIM]), t("logits", &[1, NUM_CLASSES])],
+            inputs: vec![t("x", vec![Dim::Fixed(1), n.clone(), f]), t("adj", vec![Dim::Fixed(1), n.clone(), n])],
+            outputs: vec![t("embedding", Dim::fixed(&[1, EMBEDDING_DIM])), t("logits", Dim::fixed(&[1, NUM_CLASSES]))],
             temperature: None,
         }
     }
@@ -160,8 +209,8 @@ pub enum ManifestError {
     Onnx { file: PathBuf, reason: String },
     #[error("{file}: {side} {index} is named {actual:?}, the manifest says {expected:?}")]
     Name { file: PathBuf, side: &'static str, index: usize, expected: String, actual: String },
-    #[error("{file}: tensor {tensor:?} has shape {actual:?}, the manifest says {expected:?}")]
-    Shape { file: PathBuf, tensor: String, expected: Vec<usize>, actual: String },
+    #[error("{file}: tensor {tensor:?} has shape {actual}, the manifest says {expected}")]
+    Shape { file: PathBuf, tensor: String, expected: String, actual: String },
     #[error("{file}: has {actual} {side}s, the manifest lists {expected}")]
     Count { file: PathBuf, side: &'static str, expected: usize, actual: usize },
 }
@@ -180,6 +229,23 @@ impl Manifest {
             check_onnx(&dir.join(&spec.file), spec)?;
         }
         Ok(m)
+    }
+
+    /// How the GCN is fed: padded to `max_nodes`, or only the real nodes when its file
+    /// names the node count (checked consistent with the file at load).
+    pub fn gcn_nodes(&self) -> GcnNodes {
+        match self.gcn_node_dim() {
+            Dim::Named(_) => GcnNodes::Real,
+            Dim::Fixed(n) => GcnNodes::Padded(n),
+        }
+    }
+
+    /// The GCN's node dimension: the name its first input gives it, else max_nodes.
+    fn gcn_node_dim(&self) -> Dim {
+        match self.models.gcn.inputs.first().and_then(|x| x.shape.get(1)) {
+            Some(Dim::Named(name)) => Dim::Named(name.clone()),
+            _ => Dim::Fixed(self.max_nodes),
+        }
     }
 
     /// Rows fed to the temporal models per window.
@@ -209,34 +275,42 @@ impl Manifest {
             return bad(format!("frames {} must be within 1..=window ({})", self.frames(), self.window));
         }
         let (n, w, steps) = (self.max_nodes, self.frames(), self.horizon + 1);
-        let expect = |spec: &ModelSpec, what: ModelKind, inputs: &[&[usize]], outputs: &[&[usize]]| {
-            let ins: Vec<&[usize]> = spec.inputs.iter().map(|t| t.shape.as_slice()).collect();
-            let outs: Vec<&[usize]> = spec.outputs.iter().map(|t| t.shape.as_slice()).collect();
-            if ins != inputs || outs != outputs {
+        let expect = |spec: &ModelSpec, what: ModelKind, want: &ModelSpec| {
+            let shapes = |ts: &[TensorSpec]| ts.iter().map(|t| shown(&t.shape)).collect::<Vec<_>>().join(" ");
+            let same = |a: &[TensorSpec], b: &[TensorSpec]| a.iter().map(|t| &t.shape).eq(b.iter().map(|t| &t.shape));
+            if !same(&spec.inputs, &want.inputs) || !same(&spec.outputs, &want.outputs) {
                 return bad(format!(
-                    "{what} ({}) declares inputs {ins:?} and outputs {outs:?}; with max_nodes {n}, window {} ({w} frames), horizon {} and {:?} rows the daemon feeds {inputs:?} and reads {outputs:?}",
-                    spec.file, self.window, self.horizon, self.row
+                    "{what} ({}) declares inputs {} and outputs {}; with max_nodes {n}, window {} ({w} frames), horizon {} and {:?} rows the daemon feeds {} and reads {}",
+                    spec.file,
+                    shapes(&spec.inputs),
+                    shapes(&spec.outputs),
+                    self.window,
+                    self.horizon,
+                    self.row,
+                    shapes(&want.inputs),
+                    shapes(&want.outputs),
                 ));
             }
             Ok(())
         };
-        expect(
-            &self.models.gcn,
-            ModelKind::Gcn,
-            &[&[1, n, NODE_FEATURE_DIM], &[1, n, n]],
-            &[&[1, EMBEDDING_DIM], &[1, NUM_CLASSES]],
-        )?;
+        let one_input = |name: &str, shape: &[usize], steps: usize| ModelSpec {
+            file: String::new(),
+            inputs: vec![TensorSpec { name: name.into(), shape: Dim::fixed(shape) }],
+            outputs: vec![TensorSpec { name: "logits".into(), shape: Dim::fixed(&[1, steps, NUM_CLASSES]) }],
+            temperature: None,
+        };
+        expect(&self.models.gcn, ModelKind::Gcn, &ModelSpec::gcn(self.gcn_node_dim()))?;
         for temporal in [TemporalModel::Ego, TemporalModel::Collective] {
             let kind = ModelKind::gru(temporal);
             let spec = self.models.get(kind).expect("every set has both GRUs");
-            expect(spec, kind, &[&[1, w, temporal.row_dim(self.row)]], &[&[1, steps, NUM_CLASSES]])?;
+            expect(spec, kind, &one_input("window", &[1, w, temporal.row_dim(self.row)], steps))?;
             match spec.temperature {
                 Some(t) if t.is_finite() && t > 0.0 => {}
                 other => return bad(format!("{kind}.temperature is {other:?}; it must be a positive number")),
             }
         }
         if let Some(cnn) = &self.models.cnn1d {
-            expect(cnn, ModelKind::Cnn1d, &[&[1, w, CNN1D_DIM]], &[&[1, steps, NUM_CLASSES]])?;
+            expect(cnn, ModelKind::Cnn1d, &one_input("window", &[1, w, CNN1D_DIM], steps))?;
         }
         Ok(())
     }
@@ -247,41 +321,71 @@ impl Manifest {
 pub fn check_onnx(file: &Path, spec: &ModelSpec) -> Result<(), ManifestError> {
     let onnx_err = |e: TractError| ManifestError::Onnx { file: file.to_owned(), reason: format!("{e:#}") };
     let model = tract_onnx::onnx().model_for_path(file).map_err(onnx_err)?;
-    let inputs: Vec<(String, Option<TVec<usize>>, String)> = model
+    let inputs: Vec<(String, Option<Vec<Dim>>, String)> = model
         .input_outlets()
         .map_err(onnx_err)?
         .iter()
         .map(|&o| {
             let fact = model.outlet_fact(o).map_err(onnx_err)?;
             let name = model.node(o.node).name.clone();
-            Ok((name, fact.shape.as_concrete_finite().ok().flatten(), format!("{:?}", fact.shape)))
+            let dims = (!fact.shape.is_open())
+                .then(|| {
+                    fact.shape.dims().map(|d| d.concretize().and_then(|d| declared(&d))).collect::<Option<Vec<_>>>()
+                })
+                .flatten();
+            Ok((name, dims, format!("{:?}", fact.shape)))
         })
         .collect::<Result<_, ManifestError>>()?;
     compare(file, "input", &inputs, &spec.inputs)?;
     let typed = model.into_typed().map_err(onnx_err)?;
-    let outputs: Vec<(String, Option<TVec<usize>>, String)> = typed
+    let outputs: Vec<(String, Option<Vec<Dim>>, String)> = typed
         .output_outlets()
         .map_err(onnx_err)?
         .iter()
         .map(|&o| {
             let fact = typed.outlet_fact(o).map_err(onnx_err)?;
             let name = typed.outlet_label(o).unwrap_or(&typed.node(o.node).name).to_owned();
-            Ok((name, fact.shape.as_concrete().map(|s| s.iter().copied().collect()), format!("{:?}", fact.shape)))
+            Ok((name, fact.shape.as_concrete().map(Dim::fixed), format!("{:?}", fact.shape)))
         })
         .collect::<Result<_, ManifestError>>()?;
     compare(file, "output", &outputs, &spec.outputs)
 }
 
+/// The name a GCN file gives its node count (dimension 1 of its first input), or
+/// `None` when it fixes it.
+pub fn declared_node_dim(file: &Path) -> Result<Option<String>, ManifestError> {
+    let onnx_err = |e: TractError| ManifestError::Onnx { file: file.to_owned(), reason: format!("{e:#}") };
+    let model = tract_onnx::onnx().model_for_path(file).map_err(onnx_err)?;
+    let input = model.input_outlets().map_err(onnx_err)?.first().copied();
+    let dim = match input {
+        Some(o) => model.outlet_fact(o).map_err(onnx_err)?.shape.dim(1).and_then(|d| d.concretize()),
+        None => None,
+    };
+    Ok(match dim.as_ref().and_then(declared) {
+        Some(Dim::Named(name)) => Some(name),
+        _ => None,
+    })
+}
+
+/// A dimension as an ONNX file declares it: a size or a plain name, nothing computed.
+fn declared(d: &TDim) -> Option<Dim> {
+    match d {
+        TDim::Val(n) => usize::try_from(*n).ok().map(Dim::Fixed),
+        TDim::Sym(s) => Some(Dim::Named(s.to_string())),
+        _ => None,
+    }
+}
+
 fn compare(
     file: &Path,
     side: &'static str,
-    actual: &[(String, Option<TVec<usize>>, String)],
+    actual: &[(String, Option<Vec<Dim>>, String)],
     specs: &[TensorSpec],
 ) -> Result<(), ManifestError> {
     if actual.len() != specs.len() {
         return Err(ManifestError::Count { file: file.to_owned(), side, expected: specs.len(), actual: actual.len() });
     }
-    for (index, ((name, shape, shown), want)) in actual.iter().zip(specs).enumerate() {
+    for (index, ((name, shape, as_tract_sees_it), want)) in actual.iter().zip(specs).enumerate() {
         if *name != want.name {
             return Err(ManifestError::Name {
                 file: file.to_owned(),
@@ -295,10 +399,10 @@ fn compare(
             return Err(ManifestError::Shape {
                 file: file.to_owned(),
                 tensor: want.name.clone(),
-                expected: want.shape.clone(),
+                expected: shown(&want.shape),
                 actual: match shape {
-                    Some(s) => format!("{:?}", s.as_slice()),
-                    None => format!("{shown} (not fixed)"),
+                    Some(s) => shown(s),
+                    None => format!("{as_tract_sees_it} (not fixed)"),
                 },
             });
         }

@@ -1,12 +1,14 @@
 //! Golden tests: every runtime reproduces the outputs onnxruntime-Python gave for the
 //! reference inputs shipped beside the models (`reference.json`), within 1e-4, run after
-//! run (no state carried from one run to the next); and a
+//! run (no state carried from one run to the next); a GCN that names its node count
+//! gives the same outputs fed only a graph's real nodes as fed the padded graph; and a
 //! model set that does not match its manifest is refused with an error naming the
 //! file, the tensor and both shapes.
 //!
 //! The ort runtime is checked when built with `--features ort`; it then needs
 //! `ORT_DYLIB_PATH` (`.ci/run` sets it to the onnxruntime wheel's library).
 
+use spwi_agent::manifest::{GcnNodes, ModelKind};
 use spwi_agent::model::{Backend, Input, ModelSet};
 use std::path::{Path, PathBuf};
 
@@ -30,13 +32,13 @@ fn check_backend(backend: Backend) {
         let reference: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
         for (name, spec) in set.manifest.models.all() {
-            let floats = |v: &serde_json::Value| -> Vec<f32> {
-                v["data"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect()
-            };
             let inputs: Vec<(Vec<usize>, Vec<f32>)> = spec
                 .inputs
                 .iter()
-                .map(|t| (t.shape.clone(), floats(&reference[name.name()]["inputs"][&t.name])))
+                .map(|t| {
+                    let r = &reference[name.name()]["inputs"][&t.name];
+                    (shape(r), floats(r))
+                })
                 .collect();
             let feed: Vec<Input<'_>> = inputs.iter().map(|(s, d)| Input { shape: s, data: d }).collect();
             let mut runner = set.runner(name).unwrap();
@@ -59,9 +61,59 @@ fn check_backend(backend: Backend) {
     }
 }
 
+fn floats(v: &serde_json::Value) -> Vec<f32> {
+    v["data"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect()
+}
+
+fn shape(v: &serde_json::Value) -> Vec<usize> {
+    v["shape"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as usize).collect()
+}
+
+/// Every set whose GCN names its node count: the reference graph (padded, its real
+/// nodes are those with a self-loop) fed with only its real nodes gives the padded
+/// run's outputs within 1e-5.
+fn check_real_nodes(backend: Backend) {
+    let mut checked = 0;
+    for dir in model_sets() {
+        let set = ModelSet::load(&dir, backend, None).unwrap();
+        if set.manifest.gcn_nodes() != GcnNodes::Real {
+            continue;
+        }
+        let reference: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
+        let (x, adj) = (&reference["gcn"]["inputs"]["x"], &reference["gcn"]["inputs"]["adj"]);
+        let (x_shape, x, adj) = (shape(x), floats(x), floats(adj));
+        let (max, features) = (x_shape[1], x_shape[2]);
+        let real = (0..max).take_while(|&i| adj[i * max + i] > 0.0).count();
+        assert!((1..max).contains(&real), "{}: the reference graph should be padded", dir.display());
+        let block: Vec<f32> = (0..real).flat_map(|i| adj[i * max..i * max + real].to_vec()).collect();
+        let mut runner = set.runner(ModelKind::Gcn).unwrap();
+        let padded = runner
+            .run(&[Input { shape: &[1, max, features], data: &x }, Input { shape: &[1, max, max], data: &adj }])
+            .unwrap();
+        let compact = runner
+            .run(&[
+                Input { shape: &[1, real, features], data: &x[..real * features] },
+                Input { shape: &[1, real, real], data: &block },
+            ])
+            .unwrap();
+        for (p, c) in padded.iter().zip(&compact) {
+            let worst = p.iter().zip(c).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+            assert!(
+                worst <= 1e-5,
+                "{} {backend:?}: {real} real nodes differ from {max} padded by {worst}",
+                dir.display()
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked >= 2, "the fixture and default sets name their node count");
+}
+
 #[test]
 fn tract_matches_onnxruntime_python() {
     check_backend(Backend::Tract);
+    check_real_nodes(Backend::Tract);
 }
 
 #[cfg(feature = "ort")]
@@ -72,6 +124,7 @@ fn ort_matches_onnxruntime_python() {
         "built with the ort feature but ORT_DYLIB_PATH is not set: point it at the onnxruntime wheel's libonnxruntime.so"
     );
     check_backend(Backend::Ort);
+    check_real_nodes(Backend::Ort);
 }
 
 #[cfg(not(feature = "ort"))]
@@ -99,15 +152,15 @@ fn a_manifest_that_lies_about_a_shape_is_refused_naming_file_tensor_and_shapes()
     let dir = fixture_copy("shape");
     let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
     let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
-    // The ONNX GCN is built for 16 nodes; claim 12 everywhere so the interface is
-    // self-consistent and only the file disagrees.
+    // The ONNX GCN names its node count; claim a fixed 12 everywhere so the interface
+    // is self-consistent and only the file disagrees.
     m["max_nodes"] = 12.into();
     m["models"]["gcn"]["inputs"][0]["shape"] = serde_json::json!([1, 12, 1024]);
     m["models"]["gcn"]["inputs"][1]["shape"] = serde_json::json!([1, 12, 12]);
     std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
     let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
     assert!(
-        e.contains("gcn.onnx") && e.contains("\"x\"") && e.contains("[1, 16, 1024]") && e.contains("[1, 12, 1024]"),
+        e.contains("gcn.onnx") && e.contains("\"x\"") && e.contains("[1, nodes, 1024]") && e.contains("[1, 12, 1024]"),
         "{e}"
     );
     std::fs::remove_dir_all(dir).unwrap();
@@ -151,4 +204,58 @@ fn a_set_whose_rows_the_daemon_cannot_build_is_refused_naming_the_tensor() {
     let e = format!("{:#}", ModelSet::load(&dir, Backend::Tract, None).unwrap_err());
     assert!(e.contains("manifest.json") && e.contains("holograms"), "{e}");
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// A frame showing the worker and `objects` objects (features varied per object).
+fn frame(objects: usize) -> spwi_proto::DetectionFrame {
+    use spwi_proto::*;
+    let feat = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.013 + k).sin()).collect::<Vec<_>>();
+    DetectionFrame {
+        robot: RobotId::new("golden").unwrap(),
+        tick: 1,
+        pose: None,
+        image_size: [640.0, 480.0],
+        human: Some(HumanDetection {
+            bbox: BBox { x: 300.0, y: 100.0, w: 50.0, h: 200.0 },
+            keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32).collect(),
+            feature: feat(1.0),
+        }),
+        objects: (0..objects)
+            .map(|k| ObjectDetection {
+                class: ObjectClass::ALL[k % ObjectClass::ALL.len()],
+                bbox: BBox { x: 45.0 * k as f32, y: 300.0, w: 40.0, h: 40.0 },
+                score: 0.9,
+                feature: feat(2.0 + k as f32),
+            })
+            .collect(),
+        scene_feature: feat(0.0),
+    }
+}
+
+#[test]
+fn the_daemons_gcn_gives_the_padded_graphs_outputs_from_its_real_nodes_alone() {
+    use spwi_agent::graph::GraphBuilder;
+    use spwi_agent::temporal::TemporalModel;
+    for set in ["fixture", "default"] {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models").join(set);
+        let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
+        let m = &set.manifest;
+        assert_eq!(m.gcn_nodes(), GcnNodes::Real, "{}", dir.display());
+        let mut inference = set.inference(TemporalModel::Ego).unwrap();
+        let mut padded = set.runner(ModelKind::Gcn).unwrap();
+        let mut builder = GraphBuilder::new(m.max_nodes, m.edge_weight);
+        for objects in [0, 3, m.max_nodes - 1] {
+            let g = builder.build(&frame(objects)).unwrap().clone();
+            let (n, f) = (m.max_nodes, g.x.len() / m.max_nodes);
+            let want = padded
+                .run(&[Input { shape: &[1, n, f], data: &g.x }, Input { shape: &[1, n, n], data: &g.adj }])
+                .unwrap();
+            let got = inference.gcn(&g).unwrap();
+            for (name, w, have) in [("embedding", &want[0], &got.embedding[..]), ("logits", &want[1], &got.logits[..])]
+            {
+                let worst = w.iter().zip(have).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+                assert!(worst <= 1e-5, "{} {objects} objects: {name} differs by {worst}", dir.display());
+            }
+        }
+    }
 }

@@ -1,7 +1,7 @@
 """ONNX export with every check the issue asks for, and the files shipped beside a model.
 
 Each model is exported at batch 1 with fixed shapes (opset 17, IR version 8 so that
-onnxruntime 1.31 and tract read it), then:
+onnxruntime 1.31 and tract read it), except the GCN's node count (node_dim.py), then:
 - `onnx.checker` (full check);
 - every GRU node must carry linear_before_reset=1 (PyTorch's GRU; some exporter versions
   wrote 0, which runs without complaint and silently predicts worse);
@@ -15,13 +15,16 @@ import onnx
 import onnxruntime as ort
 import torch
 
+from node_dim import name_node_dim
+
 OPSET = 17
 IR_VERSION = 8
 TOLERANCE = 1e-4
 
 
-def export(model, inputs, input_names, output_names, path):
-    """Exports `model` (eval mode) for `inputs` (batch 1); returns the reference entry."""
+def export(model, inputs, input_names, output_names, path, named_nodes=False):
+    """Exports `model` (eval mode) for `inputs` (batch 1); returns the reference entry.
+    `named_nodes`: a GCN, whose node dimension is then named (node_dim.py)."""
     model.eval()
     inputs = tuple(torch.from_numpy(np.round(i.numpy(), 4).astype(np.float32)) for i in inputs)
     torch.onnx.export(
@@ -29,6 +32,8 @@ def export(model, inputs, input_names, output_names, path):
     )
     m = onnx.load(path)
     m.ir_version = IR_VERSION
+    if named_nodes:
+        name_node_dim(m)
     onnx.checker.check_model(m, full_check=True)
     for node in m.graph.node:
         if node.op_type == "GRU":
@@ -56,7 +61,7 @@ def io_spec(path):
     m = onnx.load(path)
 
     def shape(vi):
-        return [d.dim_value for d in vi.type.tensor_type.shape.dim]
+        return [d.dim_param or d.dim_value for d in vi.type.tensor_type.shape.dim]
 
     return {
         "inputs": [{"name": i.name, "shape": shape(i)} for i in m.graph.input],

@@ -90,7 +90,8 @@ def main():
     path = os.path.join(a.out, "gcn.onnx")
     ref_index = int(test[0])
     reference = export(
-        model, (x[ref_index : ref_index + 1], adj[ref_index : ref_index + 1]), ["x", "adj"], ["embedding", "logits"], path
+        model, (x[ref_index : ref_index + 1], adj[ref_index : ref_index + 1]), ["x", "adj"], ["embedding", "logits"], path,
+        named_nodes=True,
     )
     with open(os.path.join(a.out, "gcn_reference.json"), "w") as f:
         json.dump(reference, f, separators=(",", ":"))

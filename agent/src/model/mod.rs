@@ -11,7 +11,7 @@ mod ort;
 mod tract;
 
 use crate::graph::StarGraph;
-use crate::manifest::{Manifest, ModelKind, ModelSpec};
+use crate::manifest::{Dim, GcnNodes, Manifest, ModelKind, ModelSpec};
 use crate::temporal::TemporalModel;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -108,7 +108,8 @@ impl ModelSet {
     /// Run state for one robot using `temporal` as its GRU.
     pub fn inference(self: &Arc<Self>, temporal: TemporalModel) -> Result<Inference> {
         let gru = self.runner(ModelKind::gru(temporal))?;
-        Ok(Inference { set: Arc::clone(self), gcn: Gcn { runner: self.gcn.runner()? }, gru, temporal })
+        let gcn = Gcn::new(self.gcn.runner()?, self.manifest.gcn_nodes());
+        Ok(Inference { set: Arc::clone(self), gcn, gru, temporal })
     }
 
     /// The GRU's softmax temperature T for `temporal`.
@@ -138,26 +139,53 @@ pub struct GcnOutput {
     pub logits: [f32; NUM_CLASSES],
 }
 
-/// A GCN runner on its own: what the dataset export needs before any GRU is trained.
+/// The GCN with how it is fed; on its own, it is what the dataset export needs before
+/// any GRU is trained.
 pub struct Gcn {
     runner: Box<dyn Runner>,
+    nodes: GcnNodes,
+    /// The real nodes' block of the adjacency ([`GcnNodes::Real`]).
+    adj: Vec<f32>,
 }
 
 impl Gcn {
+    fn new(runner: Box<dyn Runner>, nodes: GcnNodes) -> Gcn {
+        Gcn { runner, nodes, adj: Vec::new() }
+    }
+
     /// Loads a lone GCN file, checked against the interface the daemon feeds for
-    /// graphs of `max_nodes` nodes.
+    /// graphs of at most `max_nodes` nodes: padded to that many when the file fixes its
+    /// node count, only the real ones when it names it.
     pub fn load(file: &Path, max_nodes: usize, backend: Backend, ort_library: Option<&Path>) -> Result<Gcn> {
-        crate::manifest::check_onnx(file, &ModelSpec::gcn(max_nodes))?;
-        Ok(Gcn { runner: load_file(file, backend, ort_library)?.runner()? })
+        let (spec, nodes) = match crate::manifest::declared_node_dim(file)? {
+            Some(name) => (ModelSpec::gcn(Dim::Named(name)), GcnNodes::Real),
+            None => (ModelSpec::gcn(Dim::Fixed(max_nodes)), GcnNodes::Padded(max_nodes)),
+        };
+        crate::manifest::check_onnx(file, &spec)?;
+        Ok(Gcn::new(load_file(file, backend, ort_library)?.runner()?, nodes))
     }
 
     /// The worker node's embedding and the spatial-only logits.
     pub fn run(&mut self, g: &StarGraph) -> Result<GcnOutput> {
-        let n = g.max_nodes;
-        let out = self.runner.run(&[
-            Input { shape: &[1, n, crate::graph::NODE_FEATURE_DIM], data: &g.x },
-            Input { shape: &[1, n, n], data: &g.adj },
-        ])?;
+        use crate::graph::NODE_FEATURE_DIM as F;
+        let out = match self.nodes {
+            GcnNodes::Padded(n) => {
+                if n != g.max_nodes {
+                    bail!("the GCN takes graphs of {n} nodes, this one has room for {}", g.max_nodes);
+                }
+                self.runner
+                    .run(&[Input { shape: &[1, n, F], data: &g.x }, Input { shape: &[1, n, n], data: &g.adj }])?
+            }
+            GcnNodes::Real => {
+                let (n, stride) = (g.nodes, g.max_nodes);
+                self.adj.clear();
+                self.adj.extend((0..n).flat_map(|i| &g.adj[i * stride..i * stride + n]));
+                self.runner.run(&[
+                    Input { shape: &[1, n, F], data: &g.x[..n * F] },
+                    Input { shape: &[1, n, n], data: &self.adj },
+                ])?
+            }
+        };
         let [embedding, logits] =
             <[Vec<f32>; 2]>::try_from(out).map_err(|o| anyhow::anyhow!("gcn gave {} outputs", o.len()))?;
         if embedding.len() != EMBEDDING_DIM || logits.len() != NUM_CLASSES {
