@@ -205,11 +205,27 @@ pub struct BenchArgs {
     /// In a soak: how often the robot before it is frozen (SIGSTOP) for 5 s.
     #[arg(long, default_value = "2m", value_parser = crate::demo::parse_duration)]
     pub freeze_every: Duration,
+    /// In a soak: the share of settled ticks that may go undecided (the target is 0).
+    #[arg(long, default_value_t = 0.0)]
+    pub max_undecided: f64,
 }
 
 /// `spwi-sim bench`: parses nothing more, runs the tool.
 pub fn main(a: BenchArgs) -> Result<()> {
-    let BenchArgs { robots, duration, free, scenario, agent, models, json, secured, soak, churn, freeze_every } = a;
+    let BenchArgs {
+        robots,
+        duration,
+        free,
+        scenario,
+        agent,
+        models,
+        json,
+        secured,
+        soak,
+        churn,
+        freeze_every,
+        max_undecided,
+    } = a;
     init_tracing(LogFormat::Human);
     let agent = match agent {
         Some(a) => a,
@@ -232,7 +248,7 @@ pub fn main(a: BenchArgs) -> Result<()> {
         if let Some(path) = json {
             std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
         }
-        if let Some(why) = report.failure() {
+        if let Some(why) = report.failure(max_undecided) {
             anyhow::bail!("the fleet did not stay up: {why}");
         }
         return Ok(());
