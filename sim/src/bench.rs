@@ -10,7 +10,7 @@
 //! (CA, the world, one identity per agent), mutual TLS and access control on every link.
 
 use crate::demo::percentile;
-use crate::loopback::{layout_with_slots, usage, FleetOptions, LoopbackFleet, Usage};
+use crate::loopback::{layout_with_slots, FleetOptions, LoopbackFleet, Usage};
 use anyhow::Result;
 use serde::Serialize;
 use spwi_agent::cli::init_tracing;
@@ -84,11 +84,10 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let (mut cpu0, mut measure_from) = (Vec::new(), None);
     let started = Instant::now();
     let mut next = Instant::now();
-    let cpu = |fleet: &LoopbackFleet, slot| fleet.pid(slot).and_then(usage).unwrap_or_default();
     loop {
         let now = Instant::now();
         if measure_from.is_none() && now - started >= warmup {
-            cpu0 = (0..o.robots).map(|slot| cpu(&fleet, slot).cpu_s).collect();
+            cpu0 = (0..o.robots).map(|slot| fleet.usage(slot).cpu_s).collect();
             let mut st = fleet.seen.lock().expect("fleet observer");
             (st.messages, st.bytes) = (0, 0);
             measure_from = Some((now, world.tick + 1));
@@ -114,7 +113,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let (measured_since, first_tick) = measure_from.expect("measured");
     let elapsed = measured_since.elapsed().as_secs_f64();
     tokio::time::sleep(Duration::from_millis(300)).await; // the last decisions
-    let usage: Vec<Usage> = (0..o.robots).map(|slot| cpu(&fleet, slot)).collect();
+    let usage: Vec<Usage> = (0..o.robots).map(|slot| fleet.usage(slot)).collect();
     let seen = fleet.seen.clone();
     drop(fleet);
 

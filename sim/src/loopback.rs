@@ -215,6 +215,11 @@ impl LoopbackFleet {
         self.agents[slot].as_ref().map(Child::id)
     }
 
+    /// What the agent of `slot` uses of the machine (zeros when it is not running).
+    pub fn usage(&self, slot: usize) -> Usage {
+        self.pid(slot).and_then(usage).unwrap_or_default()
+    }
+
     /// Waits until `n` robots hold their liveliness tokens.
     pub async fn wait_members(&self, n: usize, limit: Duration) -> Result<()> {
         let since = Instant::now();

@@ -14,7 +14,7 @@
 //! at the end: a leak shows as growth.
 
 use crate::bench::LatencyMs;
-use crate::loopback::{layout_with_slots, usage, FleetOptions, LoopbackFleet, Usage};
+use crate::loopback::{layout_with_slots, FleetOptions, LoopbackFleet, Usage};
 use anyhow::{bail, Result};
 use serde::Serialize;
 use spwi_proto::{RobotId, TICK_PERIOD};
@@ -124,9 +124,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     })
     .await?;
     let mut world = World::new(layout_with_slots(o.robots), o.scenario, 1, o.robots);
-    let resources = |fleet: &LoopbackFleet| -> Vec<Usage> {
-        untouched.clone().map(|slot| fleet.pid(slot).and_then(usage).unwrap_or_default()).collect()
-    };
+    let resources = |fleet: &LoopbackFleet| -> Vec<Usage> { untouched.clone().map(|slot| fleet.usage(slot)).collect() };
     let started = Instant::now();
     let mut next = Instant::now();
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
