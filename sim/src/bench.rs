@@ -21,13 +21,10 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 pub struct BenchOptions {
-    pub robots: usize,
+    pub fleet: FleetOptions,
     pub duration: Duration,
     pub free_running: bool,
     pub scenario: Scenario,
-    pub agent: PathBuf,
-    pub models: Option<PathBuf>,
-    pub secured: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -71,14 +68,9 @@ pub struct BenchReport {
 }
 
 pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
-    let fleet = LoopbackFleet::start(FleetOptions {
-        robots: o.robots,
-        agent: o.agent.clone(),
-        models: o.models.clone(),
-        secured: o.secured,
-    })
-    .await?;
-    let mut world = World::new(layout_with_slots(o.robots), o.scenario, 1, o.robots);
+    let robots = o.fleet.robots;
+    let fleet = LoopbackFleet::start(o.fleet.clone()).await?;
+    let mut world = World::new(layout_with_slots(robots), o.scenario, 1, robots);
     let warmup = Duration::from_secs(2);
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
     let (mut cpu0, mut measure_from) = (Vec::new(), None);
@@ -87,7 +79,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     loop {
         let now = Instant::now();
         if measure_from.is_none() && now - started >= warmup {
-            cpu0 = (0..o.robots).map(|slot| fleet.usage(slot).cpu_s).collect();
+            cpu0 = (0..robots).map(|slot| fleet.usage(slot).cpu_s).collect();
             let mut st = fleet.seen.lock().expect("fleet observer");
             (st.messages, st.bytes) = (0, 0);
             measure_from = Some((now, world.tick + 1));
@@ -101,7 +93,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         if o.free_running {
             let deadline = published[&t] + Duration::from_millis(200);
             while Instant::now() < deadline
-                && fleet.seen.lock().expect("fleet observer").decisions.get(&t).is_none_or(|d| d.len() < o.robots)
+                && fleet.seen.lock().expect("fleet observer").decisions.get(&t).is_none_or(|d| d.len() < robots)
             {
                 tokio::time::sleep(Duration::from_micros(200)).await;
             }
@@ -113,7 +105,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let (measured_since, first_tick) = measure_from.expect("measured");
     let elapsed = measured_since.elapsed().as_secs_f64();
     tokio::time::sleep(Duration::from_millis(300)).await; // the last decisions
-    let usage: Vec<Usage> = (0..o.robots).map(|slot| fleet.usage(slot)).collect();
+    let usage: Vec<Usage> = (0..robots).map(|slot| fleet.usage(slot)).collect();
     let seen = fleet.seen.clone();
     drop(fleet);
 
@@ -122,7 +114,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let ticks = last_tick + 1 - first_tick;
     let (mut latencies, mut agreed, mut complete, mut incomplete) = (Vec::new(), 0u64, 0u64, 0u64);
     for t in first_tick..=last_tick {
-        let Some(d) = st.decisions.get(&t).filter(|d| d.len() == o.robots) else {
+        let Some(d) = st.decisions.get(&t).filter(|d| d.len() == robots) else {
             incomplete += 1;
             continue;
         };
@@ -133,11 +125,11 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         agreed += u64::from(d.values().all(|d| d.class == first));
     }
     latencies.sort_by(f64::total_cmp);
-    let n = o.robots as f64;
+    let n = robots as f64;
     Ok(BenchReport {
-        robots: o.robots,
+        robots,
         free_running: o.free_running,
-        secured: o.secured,
+        secured: o.fleet.secured,
         ticks,
         ticks_per_second: ticks as f64 / elapsed,
         latency_ms: LatencyMs::of(&latencies),
@@ -230,41 +222,27 @@ pub fn main(a: BenchArgs) -> Result<()> {
         Some(a) => a,
         None => std::env::current_exe()?.with_file_name("spwi-agent"),
     };
+    let fleet = FleetOptions { robots: robots as usize, agent, models, secured };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     if let Some(duration) = soak {
-        let opts = crate::soak::SoakOptions {
-            robots: robots as usize,
-            duration,
-            churn,
-            freeze_every,
-            scenario,
-            agent,
-            models,
-            secured,
-        };
+        let opts = crate::soak::SoakOptions { fleet, duration, churn, freeze_every, scenario };
         let report = rt.block_on(crate::soak::run(&opts))?;
         crate::soak::print(&report);
-        if let Some(path) = json {
-            std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
-        }
+        write_json(json.as_deref(), &report)?;
         if let Some(why) = report.failure(max_undecided) {
             anyhow::bail!("the fleet did not stay up: {why}");
         }
         return Ok(());
     }
-    let opts = crate::bench::BenchOptions {
-        robots: robots as usize,
-        duration,
-        free_running: free,
-        scenario,
-        agent,
-        models,
-        secured,
-    };
-    let report = rt.block_on(crate::bench::run(&opts))?;
-    crate::bench::print(&report);
-    if let Some(path) = json {
-        std::fs::write(&path, serde_json::to_string_pretty(&report)?)?;
+    let report = rt.block_on(run(&BenchOptions { fleet, duration, free_running: free, scenario }))?;
+    print(&report);
+    write_json(json.as_deref(), &report)
+}
+
+/// `--json FILE`: the report, pretty-printed.
+fn write_json(path: Option<&std::path::Path>, report: &impl Serialize) -> Result<()> {
+    if let Some(path) = path {
+        std::fs::write(path, serde_json::to_string_pretty(report)?)?;
     }
     Ok(())
 }

@@ -19,6 +19,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// How the fleet is made up.
+#[derive(Debug, Clone)]
 pub struct FleetOptions {
     pub robots: usize,
     /// The spwi-agent binary.

@@ -20,7 +20,6 @@ use serde::Serialize;
 use spwi_proto::{RobotId, TICK_PERIOD};
 use spwi_world::world::{Scenario, World};
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 /// How long a robot stays frozen.
@@ -32,14 +31,11 @@ pub const SETTLE: Duration = Duration::from_secs(5);
 const WARMUP: Duration = Duration::from_secs(2);
 
 pub struct SoakOptions {
-    pub robots: usize,
+    pub fleet: FleetOptions,
     pub duration: Duration,
     pub churn: Duration,
     pub freeze_every: Duration,
     pub scenario: Scenario,
-    pub agent: PathBuf,
-    pub models: Option<PathBuf>,
-    pub secured: bool,
 }
 
 /// `--json` keeps these keys.
@@ -111,19 +107,14 @@ enum Event {
 }
 
 pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
-    if o.robots < 3 {
+    let robots = o.fleet.robots;
+    if robots < 3 {
         bail!("a soak needs at least 3 robots: one leaves and comes back, one is frozen, the others are watched");
     }
-    let (churning, freezing) = (o.robots - 1, o.robots - 2);
+    let (churning, freezing) = (robots - 1, robots - 2);
     let untouched = 0..freezing;
-    let mut fleet = LoopbackFleet::start(FleetOptions {
-        robots: o.robots,
-        agent: o.agent.clone(),
-        models: o.models.clone(),
-        secured: o.secured,
-    })
-    .await?;
-    let mut world = World::new(layout_with_slots(o.robots), o.scenario, 1, o.robots);
+    let mut fleet = LoopbackFleet::start(o.fleet.clone()).await?;
+    let mut world = World::new(layout_with_slots(robots), o.scenario, 1, robots);
     let resources = |fleet: &LoopbackFleet| -> Vec<Usage> { untouched.clone().map(|slot| fleet.usage(slot)).collect() };
     let started = Instant::now();
     let mut next = Instant::now();
@@ -188,7 +179,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     let settle_ticks = (SETTLE.as_secs_f64() / TICK_PERIOD.as_secs_f64()).round() as u64;
     let last_tick = world.tick;
     let mut report = SoakReport {
-        robots: o.robots,
+        robots,
         seconds,
         ticks: last_tick + 1 - first_tick,
         leaves: count(&events, Event::Leave),
