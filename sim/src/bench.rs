@@ -186,6 +186,10 @@ pub struct BenchArgs {
     /// Run the fleet secured (mutual TLS, access control), with a throw-away CA.
     #[arg(long)]
     pub secured: bool,
+    /// A Zenoh setting for every agent, as `spwi-agent --cfg KEY:VALUE` takes it
+    /// (repeatable): to measure a tuning before making it a default.
+    #[arg(long = "agent-cfg", value_name = "KEY:VALUE")]
+    pub agent_cfg: Vec<String>,
     /// A soak instead of a measurement: run this long (e.g. 30m) while robots leave,
     /// come back and freeze (see --churn); fails if the fleet did not stay up.
     #[arg(long, value_parser = crate::demo::parse_duration)]
@@ -212,6 +216,7 @@ pub fn main(a: BenchArgs) -> Result<()> {
         models,
         json,
         secured,
+        agent_cfg,
         soak,
         churn,
         freeze_every,
@@ -222,7 +227,7 @@ pub fn main(a: BenchArgs) -> Result<()> {
         Some(a) => a,
         None => std::env::current_exe()?.with_file_name("spwi-agent"),
     };
-    let fleet = FleetOptions { robots: robots as usize, agent, models, secured };
+    let fleet = FleetOptions { robots: robots as usize, agent, models, secured, agent_cfg };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     if let Some(duration) = soak {
         let opts = crate::soak::SoakOptions { fleet, duration, churn, freeze_every, scenario };

@@ -28,6 +28,8 @@ pub struct FleetOptions {
     pub models: Option<PathBuf>,
     /// Mutual TLS and access control on every link, with a throw-away CA.
     pub secured: bool,
+    /// Zenoh settings (`KEY:VALUE`) passed to every agent after the fleet's own.
+    pub agent_cfg: Vec<String>,
 }
 
 /// One robot's decision as the hub received it.
@@ -175,6 +177,7 @@ impl LoopbackFleet {
             .args(["--cfg", r#"listen/endpoints:["tcp/127.0.0.1:0"]"#])
             .args(["--cfg", &format!(r#"connect/endpoints:["{}"]"#, self.hub)])
             .args(["--cfg", "scouting/multicast/enabled:false"])
+            .args(self.options.agent_cfg.iter().flat_map(|c| ["--cfg", c.as_str()]))
             .env("RUST_LOG", "warn,zenoh=error")
             .stdout(Stdio::null())
             .stderr(Stdio::null());

@@ -41,6 +41,8 @@ pub struct Tallies {
     /// team map (no relation row describes it).
     pub collective_goal_unmapped: Tally,
     pub cnn1d: Tally,
+    /// How well the robots' team maps place the stations, over the scored robot-ticks.
+    pub map: MapQuality,
     /// The same, on the ticks where the worker heads to a station of a close pair.
     pub close_pair: ClosePair,
     /// Per robot slot: gnn, ego, collective.
@@ -80,9 +82,12 @@ impl Tallies {
             (&mut self.close_pair.consensus, &o.close_pair.consensus),
             (&mut self.close_pair.team_all_ticks, &o.close_pair.team_all_ticks),
             (&mut self.close_pair.cvm, &o.close_pair.cvm),
+            (&mut self.close_pair.farther_collective, &o.close_pair.farther_collective),
+            (&mut self.close_pair.farther_cvm, &o.close_pair.farther_cvm),
         ] {
             a.merge(b);
         }
+        self.map.merge(&o.map);
         if self.per_robot.len() < o.per_robot.len() {
             self.per_robot.resize(o.per_robot.len(), Default::default());
         }
@@ -116,6 +121,42 @@ impl Tallies {
     }
 }
 
+/// Per station: on how many robot-ticks the team map held it, and how far from its
+/// true work spot (sum and count of placements more than [`MapQuality::FAR_M`] off).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MapQuality {
+    pub robot_ticks: u64,
+    pub mapped: [u64; NUM_CLASSES],
+    pub error_sum: [f64; NUM_CLASSES],
+    pub far: [u64; NUM_CLASSES],
+}
+
+impl MapQuality {
+    /// A station placed farther than this from its work spot is misplaced: about the
+    /// spread of its objects round the spot.
+    pub const FAR_M: f32 = 2.0;
+
+    fn add(&mut self, errors: &[Option<f32>; NUM_CLASSES]) {
+        self.robot_ticks += 1;
+        for (k, e) in errors.iter().enumerate() {
+            if let Some(e) = e {
+                self.mapped[k] += 1;
+                self.error_sum[k] += f64::from(*e);
+                self.far[k] += u64::from(*e > Self::FAR_M);
+            }
+        }
+    }
+
+    fn merge(&mut self, o: &MapQuality) {
+        self.robot_ticks += o.robot_ticks;
+        for k in 0..NUM_CLASSES {
+            self.mapped[k] += o.mapped[k];
+            self.error_sum[k] += o.error_sum[k];
+            self.far[k] += o.far[k];
+        }
+    }
+}
+
 /// Tallies on the ticks where the true intent at t is a station of a close pair
 /// (work spots within 3.5 m): the hard case.
 #[derive(Debug, Clone, Default)]
@@ -125,6 +166,17 @@ pub struct ClosePair {
     pub consensus: Tally,
     pub team_all_ticks: Tally,
     pub cvm: Tally,
+    /// The collective and the CVM on the ticks where the goal is the farther station
+    /// of its pair from where the worker is (its walk passes the other one first):
+    /// their recall of that station.
+    pub farther_collective: Tally,
+    pub farther_cvm: Tally,
+}
+
+/// Whether the worker at `at` heads for the farther station of a close pair.
+fn heads_for_farther(at: [f32; 2], goal: u8, pairs: &[(u8, u8)], spots: &[[f32; 2]]) -> bool {
+    let d = |k: u8| spwi_world::geometry::dist(at, spots[k as usize]);
+    pairs.iter().any(|&(a, b)| (goal == a && d(a) > d(b)) || (goal == b && d(b) > d(a)))
 }
 
 /// What one tick left for scoring once the future truth is known.
@@ -132,6 +184,8 @@ struct TickRecord {
     per_robot: Vec<(usize, Predictions)>,
     /// Each live robot's team decision (class per step; empty if no votes or none made).
     decisions: Vec<Vec<u8>>,
+    /// The worker heads for the farther station of a close pair.
+    farther: bool,
 }
 
 /// The daemon's own engine, with the evaluation's `[tick]` settings, for robot `slot`.
@@ -248,7 +302,8 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             per_robot.push((slot, p));
             decisions.push(decided[slot].take().unwrap_or_default());
         }
-        records.push(TickRecord { per_robot, decisions });
+        let farther = heads_for_farther(world.worker.position, world.worker.goal, &pairs, &spots);
+        records.push(TickRecord { per_robot, decisions, farther });
     }
 
     // Score now that the truth of every horizon is known.
@@ -277,7 +332,11 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                 if close {
                     tallies.close_pair.collective.add(c, truth);
                 }
-                if !p.mapped[truth[0] as usize] {
+                if rec.farther {
+                    tallies.close_pair.farther_collective.add(c, truth);
+                }
+                tallies.map.add(&p.map_error);
+                if !p.mapped(truth[0]) {
                     tallies.collective_goal_unmapped.add(c, truth);
                 }
                 pr[2].add(c, truth);
@@ -293,6 +352,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                 tallies.cvm.add(c, truth);
                 if close {
                     tallies.close_pair.cvm.add(c, truth);
+                }
+                if rec.farther {
+                    tallies.close_pair.farther_cvm.add(c, truth);
                 }
             }
         }
@@ -328,5 +390,20 @@ fn encoded_len(o: &Output) -> usize {
         Output::Vote(m) => encode(m).len(),
         Output::Ballots(m) => encode(m).len(),
         Output::Decision(m) => encode(m).len(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::heads_for_farther;
+
+    #[test]
+    fn the_farther_station_of_a_pair_is_the_one_the_walk_reaches_second() {
+        let spots = [[0.0, 0.0], [10.0, 0.0], [12.5, 0.0], [5.0, 9.0]];
+        let pairs = [(1, 2)];
+        assert!(heads_for_farther([2.0, 0.0], 2, &pairs, &spots), "past 1 to reach 2");
+        assert!(!heads_for_farther([2.0, 0.0], 1, &pairs, &spots), "1 is the nearer");
+        assert!(heads_for_farther([20.0, 0.0], 1, &pairs, &spots), "from the other side, 1 is farther");
+        assert!(!heads_for_farther([2.0, 0.0], 3, &pairs, &spots), "3 is in no close pair");
     }
 }

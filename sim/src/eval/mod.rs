@@ -34,6 +34,7 @@ use serde::Serialize;
 use spwi_agent::config::TickConfig;
 use spwi_agent::manifest::Manifest;
 use spwi_agent::model::ModelSet;
+use spwi_proto::{NUM_CLASSES, STATION_NAMES};
 use spwi_world::generate::NamedLayout;
 use spwi_world::world::Scenario;
 use std::collections::{BTreeMap, BTreeSet};
@@ -143,9 +144,37 @@ pub struct Report {
     pub samples: u64,
     /// Share of those on which the goal at t was missing from the robot's team map.
     pub goal_unmapped_share: f64,
+    /// Per station, how the robots' team maps placed it on those robot-ticks.
+    pub map: Vec<StationPlacement>,
     pub seconds: f64,
     /// Wall time per robot frame (world, all models, consensus), microseconds.
     pub per_frame_us: f64,
+}
+
+/// How the robots' team maps placed one station (over the scored robot-ticks).
+#[derive(Debug, Clone, Serialize)]
+pub struct StationPlacement {
+    pub station: &'static str,
+    /// Share of robot-ticks on which the team map held it.
+    pub mapped: f64,
+    /// Mean distance from its true work spot where mapped (m).
+    pub mean_error_m: Option<f64>,
+    /// Share of its placements farther than `MapQuality::FAR_M` from the work spot.
+    pub far: Option<f64>,
+}
+
+fn placements(q: &fleet::MapQuality) -> Vec<StationPlacement> {
+    (0..NUM_CLASSES)
+        .map(|k| {
+            let n = q.mapped[k];
+            StationPlacement {
+                station: STATION_NAMES[k],
+                mapped: n as f64 / q.robot_ticks.max(1) as f64,
+                mean_error_m: (n > 0).then(|| q.error_sum[k] / n as f64),
+                far: (n > 0).then(|| q.far[k] as f64 / n as f64),
+            }
+        })
+        .collect()
 }
 
 /// Refuses an evaluation whose episodes include any the models were trained on.
@@ -215,6 +244,8 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         close_pair.insert("consensus", of(&|e| &e.close_pair.consensus));
         close_pair.insert("team_all_ticks", of(&|e| &e.close_pair.team_all_ticks));
         close_pair.insert("cvm", of(&|e| &e.close_pair.cvm));
+        close_pair.insert("collective_farther", of(&|e| &e.close_pair.farther_collective));
+        close_pair.insert("cvm_farther", of(&|e| &e.close_pair.farther_cvm));
     }
     let per_robot = (0..all.per_robot.len())
         .map(|slot| {
@@ -247,6 +278,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         confusion: BTreeMap::from([("ego", all.confusion_ego), ("collective", all.confusion_collective)]),
         samples: all.collective.samples(),
         goal_unmapped_share: all.collective_goal_unmapped.samples() as f64 / all.collective.samples().max(1) as f64,
+        map: placements(&all.map),
         seconds,
         per_frame_us: seconds * 1e6 / all.frames.max(1) as f64,
     })
@@ -358,6 +390,16 @@ pub fn print(r: &Report) {
         }
     }
     println!("  goal at t missing from the team's map on {} of the collective's ticks", pct(r.goal_unmapped_share));
+    for p in &r.map {
+        println!(
+            "  map: {:<14} on the team map {:>5}% of robot-ticks · {} m from its work spot on average · {}% > {} m off",
+            p.station,
+            pct(p.mapped),
+            p.mean_error_m.map_or("–".into(), |e| format!("{e:.2}")),
+            p.far.map_or("–".into(), pct),
+            fleet::MapQuality::FAR_M
+        );
+    }
     if !r.close_pair.is_empty() {
         println!("  heading to a station of a close pair:");
         for (name, a) in &r.close_pair {
@@ -433,6 +475,18 @@ mod tests {
             assert!((0.0..=1.0).contains(&acc.t), "{key}: {acc:?}");
         }
         assert_eq!(a.per_robot.len(), 3);
+    }
+
+    #[test]
+    fn the_team_map_places_what_the_cameras_see_near_its_work_spot() {
+        // On the built-in floor the first three robots' cameras keep the assembly bench
+        // in view; its place on the team map is the centre of the objects that mark it.
+        let r = run(&options(fixture(), Faults::none())).unwrap();
+        let assembly = &r.map[2];
+        assert_eq!(assembly.station, "assembly");
+        assert!(assembly.mapped > 0.5, "{assembly:?}");
+        assert!(assembly.mean_error_m.unwrap() < 1.5 && assembly.far == Some(0.0), "{assembly:?}");
+        assert!(r.map.iter().all(|p| (0.0..=1.0).contains(&p.mapped)), "{:?}", r.map);
     }
 
     #[test]

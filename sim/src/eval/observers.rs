@@ -31,8 +31,16 @@ pub struct Predictions {
     pub cvm: Option<Vec<u8>>,
     /// The same model given only the stations the team mapped (what our models get).
     pub cvm_mapped: Option<Vec<u8>>,
-    /// Which stations the robot's team map held at this tick.
-    pub mapped: [bool; NUM_CLASSES],
+    /// Where the robot's team map put each station at this tick, as the distance from
+    /// the station's true work spot (m); `None`: not on the map.
+    pub map_error: [Option<f32>; NUM_CLASSES],
+}
+
+impl Predictions {
+    /// Whether the robot's team map held station `k` at this tick.
+    pub fn mapped(&self, k: u8) -> bool {
+        self.map_error[k as usize].is_some()
+    }
 }
 
 pub struct Observers {
@@ -139,8 +147,9 @@ impl Observers {
             (0..NUM_CLASSES as u8).filter_map(|k| floor_view.team_map.station(k).map(|at| (k, at))).collect();
         let spots: Vec<[f32; 2]> = team.iter().map(|&(_, at)| at).collect();
         out.cvm_mapped = self.cvm.predict(&spots).map(|i| vec![team[i].0; self.horizon + 1]);
-        for &(k, _) in &team {
-            out.mapped[k as usize] = true;
+        for &(k, at) in &team {
+            let spot = station_spots[k as usize];
+            out.map_error[k as usize] = Some((at[0] - spot[0]).hypot(at[1] - spot[1]));
         }
         Ok(out)
     }

@@ -316,10 +316,15 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 "\nTicks where the worker heads to a station of the close pair (work spots within 3.5 m):\n"
             );
             let _ = writeln!(w, "| model | t | t+1…H |\n|---|---|---|");
-            for name in ["team_all_ticks", "ego", "collective", "consensus", "cvm"] {
+            for name in ["team_all_ticks", "ego", "collective", "consensus", "cvm", "collective_farther", "cvm_farther"]
+            {
                 let (t, f) = acc_in(&r.close_pair, name);
                 let _ = writeln!(w, "| {name} | {t} | {f} |");
             }
+            let _ = writeln!(
+                w,
+                "\n`*_farther`: the ticks where the goal is the station of the pair farther from the worker (its walk passes the nearer one first), i.e. the recall of the farther station."
+            );
         }
         let _ = writeln!(w, "\nConfusion at t (rows: true station 0–3, columns: predicted):\n");
         for (name, c) in &r.confusion {
@@ -443,6 +448,21 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             let _ = write!(w, " {} |", pct(r.coverage));
         }
         let _ = writeln!(w);
+        let _ = write!(w, "| goal unmapped |");
+        for r in &st.generalisation {
+            let _ = write!(w, " {} |", pct(r.goal_unmapped_share));
+        }
+        let _ = writeln!(w);
+        let _ = write!(w, "| on the team map: storage / workstation / assembly / manufacturing |");
+        for r in &st.generalisation {
+            let shares: Vec<String> = r.map.iter().map(|p| format!("{:.0}", 100.0 * p.mapped)).collect();
+            let _ = write!(w, " {} |", shares.join(" / "));
+        }
+        let _ = writeln!(w);
+        let _ = writeln!(
+            w,
+            "\n*Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map. *On the team map*: share of the scored robot-ticks on which each station is on it (built from the robots' own detections: a station no camera looks at stays off the map)."
+        );
     }
     if !st.designs.is_empty() {
         let _ = writeln!(
