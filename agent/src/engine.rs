@@ -633,6 +633,7 @@ impl Engine {
         for (robot, ok) in robots.iter().zip(agrees.iter().flatten()) {
             self.trust.learn_track(robot, *ok);
         }
+        self.floor.observe_worker(own.worker.as_ref(), team_worker.as_ref());
         let will_vote = own.will_vote;
         let relations = (self.row_layout == RowLayout::Relations).then(|| {
             let mut r = vec![0.0; RELATION_DIM];

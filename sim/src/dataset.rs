@@ -231,6 +231,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                         views[slot].add_peer_landmarks(landmarks);
                     }
                 }
+                views[slot].observe_worker(shared[slot].0.as_ref(), team.as_ref());
                 let v = &views[slot];
                 floor::relations(shared[slot].0.as_ref(), &v.own_map.stations(), &mut row.relations_ego);
                 floor::relations(team.as_ref(), &v.team_map.stations(), &mut row.relations_team);

@@ -67,6 +67,13 @@ impl FloorView {
         self.track.estimate(tick)
     }
 
+    /// The worker as this robot tracks it and as the team does, once per tick: where
+    /// it stands to work teaches each map its stations' work spots.
+    pub fn observe_worker(&mut self, own: Option<&WorkerEstimate>, team: Option<&WorkerEstimate>) {
+        self.own_map.observe_worker(own);
+        self.team_map.observe_worker(team);
+    }
+
     /// A peer's landmarks of a tick, into the team map.
     pub fn add_peer_landmarks(&mut self, landmarks: &[Landmark]) {
         for l in landmarks {

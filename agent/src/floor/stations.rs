@@ -7,8 +7,16 @@
 //! seen [`MIN_HITS`] times, which keeps false positives and one-off misplacements off
 //! the map. A station's position is the weighted centre of its counted clusters
 //! around the best supported one (its objects stand around its work spot).
+//!
+//! The objects' centre can lie a metre or two from where the worker actually stands
+//! to work, which matters most between two stations a few metres apart. So the map
+//! also watches the worker: a worker whose track stays put for a second, next to
+//! the objects of a mapped station, is at work there, and once it has been seen there
+//! [`SPOT_SAMPLES`] ticks the station's position is where the worker stood (the mean
+//! of those positions) instead of its objects' centre.
 
-use spwi_proto::{Landmark, NUM_CLASSES};
+use spwi_proto::{Landmark, WorkerEstimate, NUM_CLASSES};
+use std::collections::VecDeque;
 
 /// Landmarks nearer than this (m, plus twice their own sigma) to a cluster join it.
 const MERGE_M: f32 = 1.0;
@@ -18,6 +26,22 @@ pub const MIN_HITS: u32 = 3;
 const STATION_RADIUS_M: f32 = 4.0;
 /// Clusters kept; the least seen goes first beyond.
 const MAX_CLUSTERS: usize = 256;
+/// Ticks of standing still (1 s) before the worker counts as at work.
+const DWELL_TICKS: usize = 10;
+/// The worker stands still while its track's last [`DWELL_TICKS`] positions all lie
+/// within this of their mean (m): the track's velocity is too noisy to tell.
+const STILL_RADIUS_M: f32 = 0.35;
+/// A worker at work is at the station whose nearest counted object cluster lies
+/// within this (m): the worker stands at the objects it works on, and a large
+/// object's landmark (the bottom of its box) can lie a metre past its centre.
+const AT_OBJECTS_M: f32 = 3.0;
+/// ... unless another station's objects are nearly as near (within this much more,
+/// m): then where the worker stands says nothing sure about either.
+const AMBIGUOUS_M: f32 = 1.0;
+/// Track positions less certain than this (m, 1 σ) teach no work spot.
+const SPOT_SIGMA_M: f32 = 0.5;
+/// Worker positions at a station before they stand for it instead of its objects.
+pub const SPOT_SAMPLES: u32 = 5;
 
 #[derive(Debug, Clone, PartialEq)]
 struct Cluster {
@@ -33,9 +57,19 @@ impl Cluster {
     }
 }
 
+/// Where the worker was seen standing at work at one station: a running mean.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct WorkSpot {
+    sum: [f64; 2],
+    samples: u32,
+}
+
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct StationMap {
     clusters: Vec<Cluster>,
+    spots: [WorkSpot; NUM_CLASSES],
+    /// The worker's last positions, while tracked well, oldest first.
+    recent: VecDeque<[f32; 2]>,
 }
 
 fn dist(a: [f32; 2], b: [f32; 2]) -> f32 {
@@ -74,12 +108,56 @@ impl StationMap {
         }
     }
 
+    /// The worker's track this tick (`None`: nobody tracks it). A worker staying put
+    /// for a second next to a mapped station's objects teaches where that station's
+    /// work spot is.
+    pub fn observe_worker(&mut self, worker: Option<&WorkerEstimate>) {
+        let Some(w) = worker.filter(|w| w.covariance[0].max(0.0).sqrt() <= SPOT_SIGMA_M) else {
+            self.recent.clear();
+            return;
+        };
+        if self.recent.len() == DWELL_TICKS {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(w.position);
+        if self.recent.len() < DWELL_TICKS {
+            return;
+        }
+        let n = self.recent.len() as f32;
+        let mean = self.recent.iter().fold([0.0, 0.0], |m, p| [m[0] + p[0] / n, m[1] + p[1] / n]);
+        if self.recent.iter().any(|&p| dist(p, mean) > STILL_RADIUS_M) {
+            return;
+        }
+        let near = || self.clusters.iter().filter(|c| c.hits >= MIN_HITS).map(|c| (dist(c.mean(), mean), c.station));
+        let Some((d, station)) = near().min_by(|a, b| a.0.total_cmp(&b.0)).filter(|(d, _)| *d <= AT_OBJECTS_M) else {
+            return;
+        };
+        if !near().any(|(e, other)| other != station && e <= d + AMBIGUOUS_M) {
+            let spot = &mut self.spots[station as usize];
+            spot.sum[0] += f64::from(w.position[0]);
+            spot.sum[1] += f64::from(w.position[1]);
+            spot.samples += 1;
+        }
+    }
+
     /// Where each station stands, for the stations seen often enough.
     pub fn stations(&self) -> [Option<[f32; 2]>; NUM_CLASSES] {
         std::array::from_fn(|s| self.station(s as u8))
     }
 
+    /// Where the worker stands to work at `station`, if it was seen there long enough,
+    /// else the centre of the station's objects, if they are on the map.
     pub fn station(&self, station: u8) -> Option<[f32; 2]> {
+        let objects = self.objects_centre(station)?;
+        let spot = self.spots[station as usize];
+        if spot.samples >= SPOT_SAMPLES {
+            let n = f64::from(spot.samples);
+            return Some([(spot.sum[0] / n) as f32, (spot.sum[1] / n) as f32]);
+        }
+        Some(objects)
+    }
+
+    fn objects_centre(&self, station: u8) -> Option<[f32; 2]> {
         let counted = || self.clusters.iter().filter(move |c| c.station == station && c.hits >= MIN_HITS);
         let best = counted().max_by(|a, b| a.hits.cmp(&b.hits).then(b.weight.total_cmp(&a.weight)))?.mean();
         let (mut sum, mut weight) = ([0.0f64; 2], 0.0f64);
@@ -98,6 +176,67 @@ mod tests {
 
     fn lm(station: u8, x: f32, y: f32) -> Landmark {
         Landmark { station, position: [x, y], sigma: 0.3 }
+    }
+
+    fn worker(x: f32, y: f32, speed: f32) -> WorkerEstimate {
+        WorkerEstimate { position: [x, y], velocity: [speed, 0.0], covariance: [0.04, 0.0, 0.1] }
+    }
+
+    /// A close pair: assembly's bench at (10, 11), manufacturing's machine at (12.5, 11.5).
+    fn close_pair() -> StationMap {
+        let mut m = StationMap::default();
+        for _ in 0..MIN_HITS {
+            m.add(&lm(2, 10.0, 11.0));
+            m.add(&lm(3, 12.5, 11.5));
+        }
+        m
+    }
+
+    #[test]
+    fn a_worker_standing_at_a_station_marks_its_work_spot() {
+        let mut m = close_pair();
+        assert!(dist(m.station(2).unwrap(), [10.0, 11.0]) < 1e-3, "before: the objects' centre");
+        // walks in, then works a second and a half in front of the bench, at (10, 10)
+        for t in 0..20 {
+            m.observe_worker(Some(&worker(8.0 + 0.1 * t as f32, 10.0, 1.0)));
+        }
+        for t in 0..15 {
+            let jitter = if t % 2 == 0 { 0.05 } else { -0.05 };
+            m.observe_worker(Some(&worker(10.0 + jitter, 10.0, 0.02)));
+        }
+        assert!(dist(m.station(2).unwrap(), [10.0, 10.0]) < 0.05, "{:?}", m.station(2));
+        assert!(
+            dist(m.station(3).unwrap(), [12.5, 11.5]) < 1e-3,
+            "the other station of the pair keeps its objects' centre"
+        );
+    }
+
+    #[test]
+    fn a_worker_standing_between_two_stations_marks_neither() {
+        let mut m = close_pair();
+        for _ in 0..30 {
+            m.observe_worker(Some(&worker(11.25, 10.5, 0.0))); // as near the bench as the machine
+        }
+        assert_eq!(m.stations(), close_pair().stations(), "no work spot learned");
+    }
+
+    #[test]
+    fn a_worker_passing_by_or_pausing_away_from_every_station_marks_nothing() {
+        let mut m = close_pair();
+        for t in 0..40 {
+            m.observe_worker(Some(&worker(8.0 + 0.1 * t as f32, 10.0, 1.0))); // walking past the bench
+        }
+        for _ in 0..30 {
+            m.observe_worker(Some(&worker(4.0, 4.0, 0.0))); // standing, nowhere near
+        }
+        for _ in 0..30 {
+            m.observe_worker(None); // nobody tracks it
+        }
+        for t in 0..30 {
+            // standing at the bench, but every other tick untracked: never a second in a row
+            m.observe_worker((t % 2 == 0).then(|| worker(10.0, 10.0, 0.0)).as_ref());
+        }
+        assert_eq!(m.stations(), close_pair().stations(), "no work spot learned");
     }
 
     #[test]
