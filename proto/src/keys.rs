@@ -69,6 +69,16 @@ pub fn all_alive(fleet: &FleetId) -> String {
     format!("{ROOT}/{fleet}/alive/*")
 }
 
+/// `spwi/<fleet>/robot/<robot>/**`: every topic of one robot (what it may say).
+pub fn robot_everything(fleet: &FleetId, robot: &RobotId) -> String {
+    format!("{ROOT}/{fleet}/robot/{robot}/**")
+}
+
+/// `spwi/<fleet>/world/**`: everything the simulated world says besides the frames.
+pub fn world_everything(fleet: &FleetId) -> String {
+    format!("{ROOT}/{fleet}/world/**")
+}
+
 /// `spwi/<fleet>/world/truth`
 pub fn truth(fleet: &FleetId) -> String {
     format!("{ROOT}/{fleet}/world/truth")

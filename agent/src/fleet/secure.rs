@@ -30,6 +30,7 @@ use super::credentials::Credentials;
 use super::roster::Role;
 use anyhow::{anyhow, Result};
 use serde_json::{json, Value};
+use spwi_proto::keys::{self, Topic};
 
 /// Turns `c` into a secured config for `creds`' identity.
 pub fn apply(c: &mut zenoh::Config, creds: &Credentials) -> Result<()> {
@@ -76,7 +77,7 @@ fn to_tls(endpoints: Value) -> Value {
 /// The `access_control` section for the roster of `creds`.
 pub fn access_control(creds: &Credentials) -> Value {
     let fleet = &creds.roster.fleet;
-    let everything = format!("spwi/{fleet}/**");
+    let everything = keys::everything(fleet);
     let (mut rules, mut subjects, mut policies) = (Vec::new(), Vec::new(), Vec::new());
     rules.push(json!({
         "id": "members-listen",
@@ -95,8 +96,8 @@ pub fn access_control(creds: &Credentials) -> Value {
     for m in creds.roster.admitted() {
         let name = m.name.as_str();
         let may_say: Vec<String> = match m.role {
-            Role::Robot => vec![format!("spwi/{fleet}/robot/{name}/**"), format!("spwi/{fleet}/alive/{name}")],
-            Role::World => vec![format!("spwi/{fleet}/robot/*/detections"), format!("spwi/{fleet}/world/**")],
+            Role::Robot => vec![keys::robot_everything(fleet, &m.name), keys::alive(fleet, &m.name)],
+            Role::World => vec![keys::all_robots(fleet, Topic::Detections), keys::world_everything(fleet)],
             Role::Router => vec![everything.clone()],
         };
         rules.push(json!({
