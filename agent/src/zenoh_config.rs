@@ -5,8 +5,18 @@
 //! keep-alive 4. A peer that is killed is seen at once (its TCP links close), but one
 //! that freezes, loses power or is unplugged is only seen when its lease runs out, so
 //! this bounds how long a silent robot stays in the vote (≈ 1 s). The departed peer's
-//! own lease is what counts: every robot must run the same one. A file given by the
-//! user is taken as is; set `transport/link/tx/lease` in it.
+//! own lease is what counts: every robot must run the same one.
+//!
+//! It also gives each link's data queue [`DATA_QUEUE_BATCHES`] batches instead of
+//! Zenoh's 2. A robot's tick ends in a burst of express messages (vote, relayed
+//! ballots, decision), each taking a batch of its own, and Zenoh drops a message that
+//! finds no free batch within 1 ms: on a busy host, where the link's sending task is
+//! not scheduled that soon, two batches lose the third message. Measured with the soak
+//! (8 agents, two CPU hogs beside them): 57 and 75 of 950 settled ticks missing a
+//! decision with 2 batches, 0 and 0 with 8 (docs/BENCHMARKS.md, "Soak").
+//!
+//! A file given by the user is taken as is; set `transport/link/tx/lease` and the
+//! queue size in it.
 
 use anyhow::{anyhow, bail, Result};
 use std::path::Path;
@@ -15,6 +25,8 @@ use std::path::Path;
 pub const LEASE_MS: u64 = 1000;
 /// Keep-alive messages per lease period.
 pub const KEEP_ALIVE: u64 = 4;
+/// Batches in each link's queue for data-priority messages (Zenoh allows 1–16).
+pub const DATA_QUEUE_BATCHES: u64 = 8;
 
 /// Builds the Zenoh config from an optional json5 file and `KEY:VALUE` overrides
 /// (VALUE is json5, e.g. `mode:"peer"` or `listen/endpoints:["tcp/0.0.0.0:7447"]`).
@@ -25,6 +37,7 @@ pub fn build(file: Option<&Path>, overrides: &[String]) -> Result<zenoh::Config>
             let mut c = zenoh::Config::default();
             set(&mut c, "transport/link/tx/lease", &LEASE_MS.to_string())?;
             set(&mut c, "transport/link/tx/keep_alive", &KEEP_ALIVE.to_string())?;
+            set(&mut c, "transport/link/tx/queue/size/data", &DATA_QUEUE_BATCHES.to_string())?;
             c
         }
     };
@@ -61,6 +74,7 @@ mod tests {
         let c = build(None, &["mode:\"client\"".to_owned()]).unwrap();
         let lease = c.get_json("transport/link/tx/lease").unwrap();
         assert_eq!(lease, "1000");
+        assert_eq!(c.get_json("transport/link/tx/queue/size/data").unwrap(), "8");
         assert_eq!(c.get_json("mode").unwrap(), "\"client\"");
     }
 
