@@ -17,6 +17,10 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+#[path = "../tests/synthetic/mod.rs"]
+mod synthetic;
+use synthetic::frame;
+
 fn measure(name: &str, iters: usize, mut f: impl FnMut()) {
     for _ in 0..iters / 10 {
         f();
@@ -37,30 +41,6 @@ fn measure(name: &str, iters: usize, mut f: impl FnMut()) {
         us(t[t.len() * 99 / 100]),
         mean
     );
-}
-
-fn frame(tick: u64, objects: usize) -> DetectionFrame {
-    let feat = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.01 + k).sin()).collect::<Vec<_>>();
-    DetectionFrame {
-        robot: RobotId::new("bench").unwrap(),
-        tick,
-        pose: Some(FloorPose { position: [2.0, 3.0], heading: 0.4 }),
-        image_size: [640.0, 480.0],
-        human: Some(HumanDetection {
-            bbox: BBox { x: 300.0, y: 100.0, w: 50.0, h: 200.0 },
-            keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32).collect(),
-            feature: feat(1.0),
-        }),
-        objects: (0..objects)
-            .map(|k| ObjectDetection {
-                class: ObjectClass::ALL[k % 10],
-                bbox: BBox { x: 40.0 * k as f32, y: 300.0, w: 40.0, h: 40.0 },
-                score: 0.9,
-                feature: feat(2.0 + k as f32),
-            })
-            .collect(),
-        scene_feature: feat(0.0),
-    }
 }
 
 fn models_dir() -> PathBuf {

@@ -12,6 +12,8 @@ use spwi_agent::manifest::{GcnNodes, ModelKind};
 use spwi_agent::model::{Backend, Input, ModelSet};
 use std::path::{Path, PathBuf};
 
+mod synthetic;
+
 const TOLERANCE: f32 = 1e-4;
 
 fn model_sets() -> Vec<PathBuf> {
@@ -206,32 +208,6 @@ fn a_set_whose_rows_the_daemon_cannot_build_is_refused_naming_the_tensor() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
-/// A frame showing the worker and `objects` objects (features varied per object).
-fn frame(objects: usize) -> spwi_proto::DetectionFrame {
-    use spwi_proto::*;
-    let feat = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.013 + k).sin()).collect::<Vec<_>>();
-    DetectionFrame {
-        robot: RobotId::new("golden").unwrap(),
-        tick: 1,
-        pose: None,
-        image_size: [640.0, 480.0],
-        human: Some(HumanDetection {
-            bbox: BBox { x: 300.0, y: 100.0, w: 50.0, h: 200.0 },
-            keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32).collect(),
-            feature: feat(1.0),
-        }),
-        objects: (0..objects)
-            .map(|k| ObjectDetection {
-                class: ObjectClass::ALL[k % ObjectClass::ALL.len()],
-                bbox: BBox { x: 45.0 * k as f32, y: 300.0, w: 40.0, h: 40.0 },
-                score: 0.9,
-                feature: feat(2.0 + k as f32),
-            })
-            .collect(),
-        scene_feature: feat(0.0),
-    }
-}
-
 #[test]
 fn the_daemons_gcn_gives_the_padded_graphs_outputs_from_its_real_nodes_alone() {
     use spwi_agent::graph::GraphBuilder;
@@ -245,7 +221,7 @@ fn the_daemons_gcn_gives_the_padded_graphs_outputs_from_its_real_nodes_alone() {
         let mut padded = set.runner(ModelKind::Gcn).unwrap();
         let mut builder = GraphBuilder::new(m.max_nodes, m.edge_weight);
         for objects in [0, 3, m.max_nodes - 1] {
-            let g = builder.build(&frame(objects)).unwrap().clone();
+            let g = builder.build(&synthetic::frame(1, objects)).unwrap().clone();
             let (n, f) = (m.max_nodes, g.x.len() / m.max_nodes);
             let want = padded
                 .run(&[Input { shape: &[1, n, f], data: &g.x }, Input { shape: &[1, n, n], data: &g.adj }])

@@ -149,7 +149,7 @@ impl Observers {
         out.cvm_mapped = self.cvm.predict(&spots).map(|i| vec![team[i].0; self.horizon + 1]);
         for &(k, at) in &team {
             let spot = station_spots[k as usize];
-            out.map_error[k as usize] = Some((at[0] - spot[0]).hypot(at[1] - spot[1]));
+            out.map_error[k as usize] = Some(spwi_world::geometry::dist(at, spot));
         }
         Ok(out)
     }
