@@ -96,7 +96,7 @@ fn bench_backend(backend: Backend) {
     });
     let mut engine = Engine::new(
         EngineConfig {
-            robot: RobotId::new("bench").unwrap(),
+            robot: frame(0, 0).robot, // the engine takes only its own robot's frames
             instance: 1,
             temporal: TemporalModel::Collective,
             embedding_wait: Duration::from_millis(30),
