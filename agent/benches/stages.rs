@@ -134,13 +134,15 @@ fn bench_codec() {
         visibility: 13,
         votes: true,
         worker: Some(WorkerEstimate { position: [3.0, 4.0], velocity: [1.0, 0.2], covariance: [0.05, 0.01, 0.2] }),
-        landmarks: (0..4).map(|s| Landmark { station: s, position: [s as f32, 2.0], sigma: 0.4 }).collect(),
+        landmarks: Station::ALL
+            .map(|s| Landmark { station: s, position: [s.index() as f32, 2.0], sigma: 0.4 })
+            .to_vec(),
     };
     let v = VoteMsg {
         robot: f.robot.clone(),
         instance: 1,
         tick: 7,
-        steps: vec![StepVote { class: 2, confidence: 0.7 }; 21],
+        steps: vec![StepVote { class: Station::Assembly, confidence: 0.7 }; 21],
         visibility: 13,
         trust: 0.9,
         quality: 0.8,
@@ -150,7 +152,7 @@ fn bench_codec() {
         robot: f.robot.clone(),
         instance: 1,
         tick: 7,
-        steps: vec![TeamStep { class: 2, score: 0.6 }; 21],
+        steps: vec![TeamStep { class: Station::Assembly, score: 0.6 }; 21],
         voters: (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect(),
         live_members: 4,
         decided_by: DecidedBy::AllVoted,

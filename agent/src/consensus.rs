@@ -33,7 +33,7 @@
 //! the votes arrived in; trust and quality travel inside the ballots for that reason.
 
 use crate::vote::argmax;
-use spwi_proto::{RobotId, StepVote, TeamStep, VoteMsg, NUM_CLASSES};
+use spwi_proto::{RobotId, Station, StepVote, TeamStep, VoteMsg, NUM_CLASSES};
 
 /// One robot's vote as the consensus sees it.
 #[derive(Debug, Clone, Copy)]
@@ -123,10 +123,10 @@ pub fn decide_sorted(ballots: &[Ballot<'_>], rule: Rule) -> Vec<TeamStep> {
             let at_h: Vec<_> = ballots.iter().filter(|b| h < b.steps.len()).collect();
             let mut score = [0.0f32; NUM_CLASSES];
             for (b, w) in at_h.iter().zip(weights(&at_h, h, rule)) {
-                score[b.steps[h].class as usize] += w;
+                score[b.steps[h].class.index()] += w;
             }
             let k = argmax(&score);
-            TeamStep { class: k as u8, score: score[k] }
+            TeamStep { class: Station::ALL[k], score: score[k] }
         })
         .collect()
 }
@@ -152,7 +152,7 @@ pub fn digest(ballots: &[Ballot<'_>]) -> u64 {
         eat(&b.quality.to_bits().to_le_bytes());
         eat(&(b.steps.len() as u32).to_le_bytes());
         for s in b.steps {
-            eat(&[s.class]);
+            eat(&[s.class.into()]);
             eat(&s.confidence.to_bits().to_le_bytes());
         }
     }
@@ -162,12 +162,13 @@ pub fn digest(ballots: &[Ballot<'_>]) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use spwi_proto::Station::*;
 
     fn id(s: &str) -> RobotId {
         RobotId::new(s).unwrap()
     }
 
-    fn sv(class: u8, confidence: f32) -> StepVote {
+    fn sv(class: Station, confidence: f32) -> StepVote {
         StepVote { class, confidence }
     }
 
@@ -183,21 +184,21 @@ mod tests {
         // v = (.6, .3, .1); c̃ = (.9, .6, .5)/2 = (.45, .3, .25)
         // α=β=.5: V = (.525, .3, .175) → score(2) = .525, score(3) = .475 → 2
         let (a, b, c) = (id("r1"), id("r2"), id("r3"));
-        let (s1, s2, s3) = ([sv(2, 0.9)], [sv(3, 0.6)], [sv(3, 0.5)]);
+        let (s1, s2, s3) = ([sv(Assembly, 0.9)], [sv(Manufacturing, 0.6)], [sv(Manufacturing, 0.5)]);
         let mut ballots = [ballot(&c, 1, &s3), ballot(&a, 6, &s1), ballot(&b, 3, &s2)];
         let d = decide(&mut ballots, PAPER);
-        assert_eq!(d[0].class, 2);
+        assert_eq!(d[0].class, Assembly);
         assert!((d[0].score - 0.525).abs() < 1e-6, "{}", d[0].score);
         // visibility alone flips nothing; confidence alone: (.45) vs (.55) → 3
         let d = decide(&mut ballots, Rule::Paper(Weights { alpha: 0.0, beta: 1.0 }));
-        assert_eq!(d[0].class, 3);
+        assert_eq!(d[0].class, Manufacturing);
         assert!((d[0].score - 0.55).abs() < 1e-6);
     }
 
     #[test]
     fn the_paper_rule_ignores_trust_and_quality() {
         let (a, b) = (id("a"), id("b"));
-        let (sa, sb) = ([sv(1, 0.9)], [sv(2, 0.6)]);
+        let (sa, sb) = ([sv(Workstation, 0.9)], [sv(Assembly, 0.6)]);
         let mut trusted = [ballot(&a, 2, &sa), ballot(&b, 2, &sb)];
         let mut doubted = [Ballot { trust: 0.05, quality: 0.1, ..trusted[0] }, trusted[1]];
         assert_eq!(decide(&mut trusted, PAPER), decide(&mut doubted, PAPER));
@@ -207,19 +208,19 @@ mod tests {
     fn trust_weighs_evidence_by_record_and_view() {
         // K = 4: e(.9) = ln(.9·3/.1) = ln 27 = 3.296; e(.6) = ln(.6·3/.4) = ln 4.5 = 1.504
         let (a, b, c) = (id("a"), id("b"), id("c"));
-        let (sa, sb, sc) = ([sv(1, 0.9)], [sv(2, 0.6)], [sv(2, 0.6)]);
+        let (sa, sb, sc) = ([sv(Workstation, 0.9)], [sv(Assembly, 0.6)], [sv(Assembly, 0.6)]);
         let mut ballots = [ballot(&a, 1, &sa), ballot(&b, 1, &sb), ballot(&c, 1, &sc)];
         // 3.296 against 2 × 1.504 = 3.008: the sure voter wins, with its share of the weight
         let d = decide(&mut ballots, Rule::Trust);
-        assert_eq!(d[0].class, 1);
+        assert_eq!(d[0].class, Workstation);
         assert!((d[0].score - 27f32.ln() / (27f32.ln() + 2.0 * 4.5f32.ln())).abs() < 1e-5, "{}", d[0].score);
         // a record of being wrong halves its weight: the two unsure voters win
         ballots[0].trust = 0.5;
-        assert_eq!(decide(&mut ballots, Rule::Trust)[0].class, 2);
+        assert_eq!(decide(&mut ballots, Rule::Trust)[0].class, Assembly);
         // as does a poor view of the worker
         ballots[0].trust = 1.0;
         ballots[0].quality = 0.5;
-        assert_eq!(decide(&mut ballots, Rule::Trust)[0].class, 2);
+        assert_eq!(decide(&mut ballots, Rule::Trust)[0].class, Assembly);
     }
 
     #[test]
@@ -227,61 +228,61 @@ mod tests {
         // e(.99) = ln 297 = 5.69 (a confidence of .99999 counts as .99): four voters at
         // .8 (e = ln 12 = 2.48 each) outweigh it, two do not
         let ids: Vec<RobotId> = ["a", "b", "c", "d", "e"].into_iter().map(id).collect();
-        let (sure, unsure) = ([sv(3, 0.99999)], [sv(1, 0.8)]);
+        let (sure, unsure) = ([sv(Manufacturing, 0.99999)], [sv(Workstation, 0.8)]);
         let mut five: Vec<Ballot<'_>> =
             ids.iter().enumerate().map(|(i, r)| ballot(r, 1, if i == 0 { &sure } else { &unsure })).collect();
-        assert_eq!(decide(&mut five, Rule::Trust)[0].class, 1);
-        assert_eq!(decide(&mut five[..3], Rule::Trust)[0].class, 3);
+        assert_eq!(decide(&mut five, Rule::Trust)[0].class, Workstation);
+        assert_eq!(decide(&mut five[..3], Rule::Trust)[0].class, Manufacturing);
         let d = decide(&mut five[..2], Rule::Trust);
         assert!((d[0].score - 297f32.ln() / (297f32.ln() + 12f32.ln())).abs() < 1e-5, "{}", d[0].score);
         // alone, a voter decides whatever its confidence
         let (a, b) = (id("a"), id("b"));
-        let sb = [sv(1, 0.3)];
+        let sb = [sv(Workstation, 0.3)];
         let d = decide(&mut [ballot(&a, 1, &sb)], Rule::Trust);
-        assert_eq!((d[0].class, d[0].score), (1, 1.0));
+        assert_eq!((d[0].class, d[0].score), (Workstation, 1.0));
         // below chance a vote is no evidence, yet the votes are still counted
-        let (s1, s2, s3) = ([sv(3, 0.1)], [sv(0, 0.1)], [sv(0, 0.1)]);
+        let (s1, s2, s3) = ([sv(Manufacturing, 0.1)], [sv(Storage, 0.1)], [sv(Storage, 0.1)]);
         let c = id("c");
         let d = decide(&mut [ballot(&a, 1, &s1), ballot(&b, 1, &s2), ballot(&c, 1, &s3)], Rule::Trust);
-        assert_eq!(d[0].class, 0);
+        assert_eq!(d[0].class, Storage);
     }
 
     #[test]
     fn every_step_is_decided_and_order_does_not_matter() {
         let (a, b) = (id("a"), id("b"));
-        let sa = [sv(0, 0.9), sv(1, 0.9)];
-        let sb = [sv(0, 0.2), sv(2, 0.3)];
+        let sa = [sv(Storage, 0.9), sv(Workstation, 0.9)];
+        let sb = [sv(Storage, 0.2), sv(Assembly, 0.3)];
         for rule in [PAPER, Rule::Trust] {
             let one = decide(&mut [ballot(&a, 2, &sa), ballot(&b, 2, &sb)], rule);
             let two = decide(&mut [ballot(&b, 2, &sb), ballot(&a, 2, &sa)], rule);
             assert_eq!(one, two);
-            assert_eq!(one.iter().map(|s| s.class).collect::<Vec<_>>(), vec![0, 1]);
+            assert_eq!(one.iter().map(|s| s.class).collect::<Vec<_>>(), vec![Storage, Workstation]);
         }
     }
 
     #[test]
     fn ties_go_to_the_lowest_class_and_zero_visibility_is_uniform() {
         let (a, b) = (id("a"), id("b"));
-        let (sa, sb) = ([sv(3, 0.5)], [sv(1, 0.5)]);
+        let (sa, sb) = ([sv(Manufacturing, 0.5)], [sv(Workstation, 0.5)]);
         let d = decide(&mut [ballot(&a, 0, &sa), ballot(&b, 0, &sb)], PAPER);
-        assert_eq!(d[0].class, 1);
+        assert_eq!(d[0].class, Workstation);
         assert!((d[0].score - 0.5).abs() < 1e-6);
         let untrusted = [Ballot { trust: 0.0, ..ballot(&a, 1, &sa) }, Ballot { trust: 0.0, ..ballot(&b, 1, &sb) }];
         let d = decide(&mut untrusted.clone(), Rule::Trust);
-        assert_eq!((d[0].class, d[0].score), (1, 0.5), "no trust anywhere: votes count alike");
+        assert_eq!((d[0].class, d[0].score), (Workstation, 0.5), "no trust anywhere: votes count alike");
     }
 
     #[test]
     fn the_digest_names_the_ballot_set_whatever_the_order() {
         let (a, b) = (id("a"), id("b"));
-        let (sa, sb) = ([sv(3, 0.5)], [sv(1, 0.5)]);
+        let (sa, sb) = ([sv(Manufacturing, 0.5)], [sv(Workstation, 0.5)]);
         let mut ab = [ballot(&a, 2, &sa), ballot(&b, 1, &sb)];
         let mut ba = [ab[1], ab[0]];
         decide(&mut ab, PAPER);
         decide(&mut ba, PAPER);
         assert_eq!(digest(&ab), digest(&ba));
         assert_ne!(digest(&ab), digest(&ab[..1]), "one ballot fewer, another digest");
-        let sb2 = [sv(1, 0.50001)];
+        let sb2 = [sv(Workstation, 0.50001)];
         let other = [ab[0], Ballot { steps: &sb2, ..ab[1] }];
         assert_ne!(digest(&ab), digest(&other), "a confidence that differs, another digest");
         let less_trusted = [ab[0], Ballot { trust: 0.5, ..ab[1] }];

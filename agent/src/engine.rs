@@ -206,7 +206,7 @@ impl Tick {
 /// What a decision was made of: enough to compare two robots' decisions of a tick.
 #[derive(Debug, Clone)]
 struct Verdict {
-    class: Option<u8>,
+    class: Option<Station>,
     /// Sorted.
     voters: Vec<RobotId>,
     digest: u64,
@@ -1013,7 +1013,10 @@ pub(crate) mod tests {
         assert!(a.handle(Input::Frame(frame("a", 1, true)), ms(1)).is_empty());
         assert_eq!(a.metrics.stale_frames, 1);
         for t in 100..120 {
-            a.handle(Input::Vote(vote_msg("z", 3, t, vec![StepVote { class: 0, confidence: 1.0 }])), ms(2));
+            a.handle(
+                Input::Vote(vote_msg("z", 3, t, vec![StepVote { class: Station::Storage, confidence: 1.0 }])),
+                ms(2),
+            );
         }
         assert_eq!(a.open.len(), 8);
         assert_eq!(a.metrics.evicted_ticks, 12);
@@ -1036,8 +1039,8 @@ pub(crate) mod tests {
         let range = (w.position[0] - 1.0).hypot(w.position[1] - 2.0);
         assert!((1.0..12.0).contains(&range), "in front of the camera: {w:?}");
         assert_eq!(e.landmarks.len(), 3, "crate, box and pallet mark the storage area");
-        assert!(e.landmarks.iter().all(|l| l.station == 0));
-        assert!(a.floor().own_map.station(0).is_some(), "seen three times: on the map");
+        assert!(e.landmarks.iter().all(|l| l.station == Station::Storage));
+        assert!(a.floor().own_map.station(Station::Storage).is_some(), "seen three times: on the map");
         // A frame without a pose shares nothing on the floor, and a peer's landmarks
         // reach the team map only.
         let out = a.handle(Input::Frame(frame("a", 4, true)), ms(400));
@@ -1050,10 +1053,13 @@ pub(crate) mod tests {
             visibility: 1,
             votes: false,
             worker: None,
-            landmarks: vec![Landmark { station: 3, position: [9.0, 9.0], sigma: 0.3 }; 3],
+            landmarks: vec![Landmark { station: Station::Manufacturing, position: [9.0, 9.0], sigma: 0.3 }; 3],
         };
         a.handle(Input::Embedding(peer), ms(401));
-        assert!(a.floor().team_map.station(3).is_some() && a.floor().own_map.station(3).is_none());
+        assert!(
+            a.floor().team_map.station(Station::Manufacturing).is_some()
+                && a.floor().own_map.station(Station::Manufacturing).is_none()
+        );
     }
 
     #[test]
@@ -1208,7 +1214,10 @@ pub(crate) mod tests {
         let set = models();
         let mut a = relaying("a", &set, Some(ms(40)));
         a.handle(Input::MemberJoined(id("b")), ms(0));
-        a.handle(Input::Vote(vote_msg("b", 2, 1, vec![StepVote { class: 1, confidence: 0.5 }])), ms(0));
+        a.handle(
+            Input::Vote(vote_msg("b", 2, 1, vec![StepVote { class: Station::Workstation, confidence: 0.5 }])),
+            ms(0),
+        );
         a.handle(Input::Poll, ms(99)); // tick 1, opened by b's vote, is decided
                                        // b is an active member; a's own frame shows the worker at tick 2, b stays silent.
         let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
@@ -1254,7 +1263,7 @@ pub(crate) mod tests {
         let frozen = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 1, true)), ms(0)));
         let vote_of_a = |tick| VoteMsg {
             visibility: 9,
-            ..vote_msg("a", 1, tick, vec![StepVote { class: 3, confidence: 1.0 }; 21])
+            ..vote_msg("a", 1, tick, vec![StepVote { class: Station::Manufacturing, confidence: 1.0 }; 21])
         };
         for t in 1..=7u64 {
             let now = ms(100 * t);
@@ -1290,7 +1299,8 @@ pub(crate) mod tests {
         for t in 1..=150u64 {
             let now = ms(100 * t);
             a.handle(Input::Frame(frame("a", t, false)), now);
-            for (p, class) in [("b", 1), ("c", 1), ("d", 3)] {
+            for (p, class) in [("b", Station::Workstation), ("c", Station::Workstation), ("d", Station::Manufacturing)]
+            {
                 a.handle(Input::Vote(vote_msg(p, 2, t, vec![StepVote { class, confidence: 0.8 }; 3])), now);
             }
             a.handle(Input::Poll, now + ms(99));
@@ -1364,8 +1374,15 @@ pub(crate) mod tests {
             let ours = take_vote(&out);
             trusts.push(ours.trust);
             // b always votes another class than ours, as sure as we are
-            let theirs =
-                vote_msg("b", 2, t, ours.steps.iter().map(|s| StepVote { class: (s.class + 1) % 4, ..*s }).collect());
+            let theirs = vote_msg(
+                "b",
+                2,
+                t,
+                ours.steps
+                    .iter()
+                    .map(|s| StepVote { class: Station::ALL[(s.class.index() + 1) % NUM_CLASSES], ..*s })
+                    .collect(),
+            );
             a.handle(Input::Vote(theirs), now + ms(32));
             a.handle(Input::Poll, now + ms(99));
         }

@@ -4,7 +4,7 @@
 use crate::engine::Engine;
 use crate::metrics::{Metrics, TransportCounters};
 use serde::Serialize;
-use spwi_proto::{DecisionMsg, RobotId};
+use spwi_proto::{DecisionMsg, RobotId, Station};
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex};
 
@@ -16,7 +16,7 @@ pub const RECENT_DECISIONS: usize = 100;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct RecentDecision {
     pub tick: u64,
-    pub class: Option<u8>,
+    pub class: Option<Station>,
 }
 
 #[derive(Debug, Clone, Serialize)]

@@ -128,6 +128,7 @@ impl TrustBook {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use spwi_proto::Station::{self, *};
     use spwi_proto::StepVote;
 
     fn id(s: &str) -> RobotId {
@@ -135,7 +136,7 @@ mod tests {
     }
 
     /// `class_of[i]` is what robot i votes, every step at confidence .8.
-    fn tick(book: &mut TrustBook, ids: &[RobotId], class_of: &[u8]) {
+    fn tick(book: &mut TrustBook, ids: &[RobotId], class_of: &[Station]) {
         let steps: Vec<Vec<StepVote>> =
             class_of.iter().map(|&c| vec![StepVote { class: c, confidence: 0.8 }; 3]).collect();
         let ballots: Vec<Ballot<'_>> = ids
@@ -153,19 +154,19 @@ mod tests {
         let ids = [id("a"), id("b"), id("c")];
         assert_eq!(book.of(&ids[2]), 1.0, "trusted until judged");
         for _ in 0..5 {
-            tick(&mut book, &ids, &[1, 1, 3]);
+            tick(&mut book, &ids, &[Workstation, Workstation, Manufacturing]);
         }
         let after5 = book.of(&ids[2]);
         assert!((after5 - 0.9f32.powi(5)).abs() < 1e-5, "{after5}"); // (1 − 1/10)^5
         assert!(book.fuses(&ids[2]), "0.59: still fused");
         for _ in 0..60 {
-            tick(&mut book, &ids, &[1, 1, 3]);
+            tick(&mut book, &ids, &[Workstation, Workstation, Manufacturing]);
         }
         assert_eq!(book.of(&ids[2]), 0.1, "floored");
         assert!(!book.fuses(&ids[2]));
         assert_eq!(book.of(&ids[0]), 1.0, "the two that agree keep their trust");
         for _ in 0..30 {
-            tick(&mut book, &ids, &[1, 1, 1]);
+            tick(&mut book, &ids, &[Workstation, Workstation, Workstation]);
         }
         assert!(book.of(&ids[2]) > 0.9, "recovered: {}", book.of(&ids[2]));
         assert_eq!(book.all().len(), 3);
@@ -175,12 +176,12 @@ mod tests {
     fn a_lone_voter_is_not_judged_and_agreement_counts_step_by_step() {
         let mut book = TrustBook::new(TrustConfig { window: 1, ..TrustConfig::default() });
         let ids = [id("a"), id("b")];
-        tick(&mut book, &ids[..1], &[2]);
+        tick(&mut book, &ids[..1], &[Assembly]);
         assert!(book.all().is_empty());
         // two voters, each judged against the other: a says 2 at every step, b 2, 3, 3
-        let (sa, sb) = (vec![StepVote { class: 2, confidence: 0.8 }; 3], {
-            let mut s = vec![StepVote { class: 3, confidence: 0.8 }; 3];
-            s[0].class = 2;
+        let (sa, sb) = (vec![StepVote { class: Assembly, confidence: 0.8 }; 3], {
+            let mut s = vec![StepVote { class: Manufacturing, confidence: 0.8 }; 3];
+            s[0].class = Assembly;
             s
         });
         let ballots = [
@@ -198,7 +199,7 @@ mod tests {
         let ids = [id("a"), id("b"), id("c")];
         book.learn_track(&ids[0], false); // 1 → 0.5
         assert_eq!(book.of(&ids[0]), 0.5);
-        tick(&mut book, &ids, &[3, 1, 1]); // a's votes: 1 → 0.5
+        tick(&mut book, &ids, &[Manufacturing, Workstation, Workstation]); // a's votes: 1 → 0.5
         assert_eq!(book.of(&ids[0]), 0.25);
         book.learn_track(&ids[0], true); // 0.5 → 0.75
         assert_eq!(book.of(&ids[0]), 0.375);

@@ -2,7 +2,7 @@
 //! argmax class and its calibrated confidence softmax(z / T) of that class; and how
 //! well the robot sees the worker, which the trust rule weighs the vote by. Pure.
 
-use spwi_proto::{DetectionFrame, StepVote, NUM_CLASSES};
+use spwi_proto::{DetectionFrame, Station, StepVote, NUM_CLASSES};
 
 /// A worker this tall in the image (share of its height) is seen as well as it gets:
 /// keypoints carry a few pixels of noise, so a smaller figure gives a noisier pose.
@@ -49,7 +49,7 @@ pub fn vote(logits: &[[f32; NUM_CLASSES]], temperature: f32) -> Vec<StepVote> {
         .iter()
         .map(|z| {
             let k = argmax(z);
-            StepVote { class: k as u8, confidence: softmax(z, temperature)[k] }
+            StepVote { class: Station::ALL[k], confidence: softmax(z, temperature)[k] }
         })
         .collect()
 }
@@ -62,7 +62,7 @@ mod tests {
     fn confidence_is_the_tempered_softmax_of_the_top_class() {
         let v = vote(&[[0.0, 2.0, 0.0, 0.0]], 1.0);
         let e2 = 2.0f32.exp();
-        assert_eq!(v[0].class, 1);
+        assert_eq!(v[0].class, Station::Workstation);
         assert!((v[0].confidence - e2 / (e2 + 3.0)).abs() < 1e-6);
         // a higher temperature flattens the distribution
         let cold = vote(&[[0.0, 2.0, 0.0, 0.0]], 2.0)[0].confidence;
@@ -96,7 +96,7 @@ mod tests {
     #[test]
     fn huge_logits_stay_finite_and_ties_pick_the_lowest_class() {
         let v = vote(&[[1e30, 1e30, -1e30, 0.0]], 1.0);
-        assert_eq!(v[0].class, 0);
+        assert_eq!(v[0].class, Station::Storage);
         assert!((v[0].confidence - 0.5).abs() < 1e-6);
     }
 }

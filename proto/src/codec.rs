@@ -120,13 +120,14 @@ pub fn decode_from<M: Message>(bytes: &[u8], key_robot: &RobotId) -> Result<M, D
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::station::Station;
 
     fn vote() -> VoteMsg {
         VoteMsg {
             robot: RobotId::new("r1").unwrap(),
             instance: 7,
             tick: 42,
-            steps: vec![StepVote { class: 2, confidence: 0.75 }; 21],
+            steps: vec![StepVote { class: Station::Assembly, confidence: 0.75 }; 21],
             visibility: 5,
             trust: 0.9,
             quality: 0.5,
@@ -194,25 +195,63 @@ mod tests {
         let e = decode::<BallotsMsg>(&encode(&twice)).unwrap_err().to_string();
         assert!(e.contains("two votes from r1"), "{e}");
         let mut bad = ballots(vec![vote()]);
-        bad.votes[0].steps[0].class = 9;
+        bad.votes[0].steps[0].confidence = 1.5;
         assert!(matches!(decode::<BallotsMsg>(&encode(&bad)), Err(DecodeError::Invalid { .. })));
     }
 
     #[test]
-    fn refuses_nan_and_bad_class() {
+    fn refuses_nan_and_bad_values() {
         let mut v = vote();
         v.steps[3].confidence = f32::NAN;
         assert!(matches!(decode::<VoteMsg>(&encode(&v)), Err(DecodeError::Invalid { .. })));
-        let mut v = vote();
-        v.steps[0].class = 4;
-        let e = decode::<VoteMsg>(&encode(&v)).unwrap_err().to_string();
-        assert!(e.contains("steps.class"), "{e}");
         let e = decode::<VoteMsg>(&encode(&VoteMsg { trust: 1.5, ..vote() })).unwrap_err().to_string();
         assert!(e.contains("trust") && e.contains("1.5 not in [0, 1]"), "{e}");
         let e = decode::<VoteMsg>(&encode(&VoteMsg { quality: f32::NAN, ..vote() })).unwrap_err().to_string();
         assert!(e.contains("quality"), "{e}");
         let e = decode::<VoteMsg>(&encode(&VoteMsg { signature: vec![1; 10], ..vote() })).unwrap_err().to_string();
         assert!(e.contains("signature") && e.contains("10 bytes"), "{e}");
+    }
+
+    /// A vote as protocol 5 carried it before [`Station`] existed: the class a bare byte.
+    #[derive(serde::Serialize)]
+    struct VoteWithByteClasses {
+        robot: RobotId,
+        instance: u64,
+        tick: u64,
+        steps: Vec<(u8, f32)>,
+        visibility: u32,
+        trust: f32,
+        quality: f32,
+        signature: Vec<u8>,
+    }
+
+    fn with_byte_classes(v: &VoteMsg, class: impl Fn(Station) -> u8) -> Vec<u8> {
+        let old = VoteWithByteClasses {
+            robot: v.robot.clone(),
+            instance: v.instance,
+            tick: v.tick,
+            steps: v.steps.iter().map(|s| (class(s.class), s.confidence)).collect(),
+            visibility: v.visibility,
+            trust: v.trust,
+            quality: v.quality,
+            signature: v.signature.clone(),
+        };
+        bincode::serde::encode_to_vec((PROTOCOL_VERSION, old), CONFIG).unwrap()
+    }
+
+    #[test]
+    fn a_station_is_the_byte_it_always_was_and_a_byte_naming_none_is_refused() {
+        let mut v = vote();
+        for (step, s) in v.steps.iter_mut().zip(Station::ALL.into_iter().cycle()) {
+            step.class = s;
+        }
+        let old = with_byte_classes(&v, u8::from);
+        assert_eq!(encode(&v), old, "the same bytes as a u8 class");
+        assert_eq!(decode::<VoteMsg>(&old).unwrap(), v);
+        let e = decode::<VoteMsg>(&with_byte_classes(&v, |s| if s == Station::Manufacturing { 4 } else { s.into() }))
+            .unwrap_err();
+        assert!(matches!(e, DecodeError::Malformed { .. }), "{e}");
+        assert!(e.to_string().contains("station 4 out of range 0..4"), "{e}");
     }
 
     #[test]

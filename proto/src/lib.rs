@@ -6,6 +6,7 @@
 //! ```text
 //! id.rs        RobotId / FleetId: validated, one key segment, no wildcards
 //! keys.rs      every key expression, built and parsed in one place
+//! station.rs   the four stations: what is predicted, voted and decided
 //! messages.rs  the payloads (detection frame, embedding, vote, decision, truth)
 //! codec.rs     the one `encode` / `decode` pair: version, size limit, validation
 //! ```
@@ -19,7 +20,9 @@ pub mod codec;
 pub mod id;
 pub mod keys;
 pub mod messages;
+pub mod station;
 
 pub use codec::{decode, decode_from, encode, DecodeError, Message, MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
 pub use id::{FleetId, IdError, RobotId};
 pub use messages::*;
+pub use station::{Station, UnknownStation, NUM_CLASSES};

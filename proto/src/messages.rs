@@ -3,6 +3,7 @@
 //! from the network has the dimensions documented here and only finite floats.
 
 use crate::id::RobotId;
+use crate::station::Station;
 use serde::{Deserialize, Serialize};
 
 /// Length of an appearance feature (the paper's ResNet50 output) and of the global
@@ -14,8 +15,6 @@ pub const KEYPOINT_VALUES: usize = 34;
 pub const EMBEDDING_DIM: usize = 128;
 /// The period of a tick: every frame, vote and decision belongs to one (10 Hz).
 pub const TICK_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
-/// Stations: 0 storage, 1 workstation, 2 assembly, 3 manufacturing.
-pub const NUM_CLASSES: usize = 4;
 /// Most object detections one frame may carry.
 pub const MAX_OBJECTS: usize = 64;
 /// Most steps (t plus forecast) one vote or decision may carry.
@@ -24,9 +23,6 @@ pub const MAX_STEPS: usize = 128;
 pub const MAX_MEMBERS: usize = 1024;
 /// Most floor landmarks one embedding message may carry.
 pub const MAX_LANDMARKS: usize = MAX_OBJECTS;
-
-/// Station names by class id.
-pub const STATION_NAMES: [&str; NUM_CLASSES] = ["storage", "workstation", "assembly", "manufacturing"];
 
 /// Why a value failed validation: the field and what is wrong with it.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -57,14 +53,6 @@ fn dim(field: &'static str, xs: &[f32], want: usize) -> Result<(), Invalid> {
         return Err(invalid(field, format!("has {} values, expected {want}", xs.len())));
     }
     finite(field, xs)
-}
-
-fn class(field: &'static str, c: u8) -> Result<(), Invalid> {
-    if (c as usize) < NUM_CLASSES {
-        Ok(())
-    } else {
-        Err(invalid(field, format!("class {c} out of range 0..{NUM_CLASSES}")))
-    }
 }
 
 /// An axis-aligned box in image pixels: top-left corner, width, height.
@@ -124,13 +112,13 @@ impl ObjectClass {
 
     /// The station class this object marks, if any. Chairs appear at both the
     /// workstation and the assembly station; this returns the workstation.
-    pub fn station(self) -> Option<u8> {
+    pub fn station(self) -> Option<Station> {
         use ObjectClass::*;
         match self {
-            Crate | Box | Pallet => Some(0),
-            Desk | Chair | StorageDrawer | Computer => Some(1),
-            Workbench => Some(2),
-            CncMachine | Table => Some(3),
+            Crate | Box | Pallet => Some(Station::Storage),
+            Desk | Chair | StorageDrawer | Computer => Some(Station::Workstation),
+            Workbench => Some(Station::Assembly),
+            CncMachine | Table => Some(Station::Manufacturing),
             Other => None,
         }
     }
@@ -247,7 +235,7 @@ impl WorkerEstimate {
 /// An object that marks a station, seen this tick, back-projected onto the floor.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Landmark {
-    pub station: u8,
+    pub station: Station,
     pub position: [f32; 2],
     /// Standard deviation of the position (m): grows with the distance it was seen at.
     pub sigma: f32,
@@ -285,7 +273,6 @@ impl Validate for EmbeddingMsg {
             return Err(invalid("landmarks", format!("{} landmarks, at most {MAX_LANDMARKS}", self.landmarks.len())));
         }
         for l in &self.landmarks {
-            class("landmarks.station", l.station)?;
             finite("landmarks.position", &l.position)?;
             if !(l.sigma.is_finite() && l.sigma > 0.0) {
                 return Err(invalid("landmarks.sigma", format!("{} must be a positive number", l.sigma)));
@@ -298,7 +285,7 @@ impl Validate for EmbeddingMsg {
 /// The predicted class and its calibrated confidence for one step.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct StepVote {
-    pub class: u8,
+    pub class: Station,
     pub confidence: f32,
 }
 
@@ -336,7 +323,6 @@ impl Validate for VoteMsg {
             return Err(invalid("steps", format!("{} steps, expected 1..={MAX_STEPS}", self.steps.len())));
         }
         for s in &self.steps {
-            class("steps.class", s.class)?;
             if !(s.confidence.is_finite() && (0.0..=1.0).contains(&s.confidence)) {
                 return Err(invalid("steps.confidence", format!("{} not in [0, 1]", s.confidence)));
             }
@@ -365,7 +351,7 @@ pub enum DecidedBy {
 /// The team's decision for one step: the winning class and its weighted score.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TeamStep {
-    pub class: u8,
+    pub class: Station,
     pub score: f32,
 }
 
@@ -393,7 +379,6 @@ impl Validate for DecisionMsg {
             return Err(invalid("steps", format!("{} steps, at most {MAX_STEPS}", self.steps.len())));
         }
         for s in &self.steps {
-            class("steps.class", s.class)?;
             finite("steps.score", &[s.score])?;
         }
         if self.voters.len() > MAX_MEMBERS {
@@ -460,7 +445,7 @@ pub struct RobotPose {
 pub struct TruthMsg {
     pub tick: u64,
     /// The station the worker is heading to or working at.
-    pub intent: u8,
+    pub intent: Station,
     pub phase: WorkerPhase,
     pub worker_position: [f32; 2],
     pub worker_heading: f32,
@@ -469,7 +454,6 @@ pub struct TruthMsg {
 
 impl Validate for TruthMsg {
     fn validate(&self) -> Result<(), Invalid> {
-        class("intent", self.intent)?;
         finite("worker_position", &self.worker_position)?;
         finite("worker_heading", &[self.worker_heading])?;
         if self.robots.len() > MAX_MEMBERS {

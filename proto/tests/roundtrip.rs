@@ -47,8 +47,15 @@ fn frame() -> impl Strategy<Value = DetectionFrame> {
         })
 }
 
+fn station() -> impl Strategy<Value = Station> {
+    prop::sample::select(Station::ALL.to_vec())
+}
+
 fn steps() -> impl Strategy<Value = Vec<StepVote>> {
-    prop::collection::vec((0u8..4, 0.0f32..=1.0).prop_map(|(class, confidence)| StepVote { class, confidence }), 1..40)
+    prop::collection::vec(
+        (station(), 0.0f32..=1.0).prop_map(|(class, confidence)| StepVote { class, confidence }),
+        1..40,
+    )
 }
 
 proptest! {
@@ -63,7 +70,7 @@ proptest! {
     fn embeddings_round_trip(robot in robot(), instance in any::<u64>(), tick in any::<u64>(),
                              e in prop::option::of(prop::collection::vec(finite(), EMBEDDING_DIM)), visibility in any::<u32>(),
                              worker in prop::option::of((finite(), finite(), finite(), finite(), 0.01f32..10.0, -0.5f32..0.5, 1.0f32..10.0)),
-                             landmarks in prop::collection::vec((0u8..4, finite(), finite(), 0.01f32..5.0), 0..8)) {
+                             landmarks in prop::collection::vec((station(), finite(), finite(), 0.01f32..5.0), 0..8)) {
         let worker = worker.map(|(x, y, vx, vy, pp, pv, vv)| WorkerEstimate { position: [x, y], velocity: [vx, vy], covariance: [pp, pv * pp.sqrt(), vv] });
         let landmarks = landmarks.into_iter().map(|(station, x, y, sigma)| Landmark { station, position: [x, y], sigma }).collect();
         let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, votes: visibility % 2 == 0, worker, landmarks };
@@ -79,7 +86,7 @@ proptest! {
 
     #[test]
     fn decisions_round_trip(robot in robot(), tick in any::<u64>(), voters in prop::collection::vec(robot(), 0..10),
-                            steps in prop::collection::vec((0u8..4, finite()).prop_map(|(class, score)| TeamStep { class, score }), 0..30)) {
+                            steps in prop::collection::vec((station(), finite()).prop_map(|(class, score)| TeamStep { class, score }), 0..30)) {
         let m = DecisionMsg { robot, instance: 1, tick, steps, voters, live_members: 3, decided_by: DecidedBy::Deadline, digest: tick.rotate_left(7) };
         prop_assert_eq!(decode::<DecisionMsg>(&encode(&m)).unwrap(), m);
     }

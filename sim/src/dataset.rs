@@ -174,7 +174,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         let mut rows: Vec<Vec<Pending>> = Vec::with_capacity(o.ticks as usize);
         for t in 0..total as u32 {
             world.step();
-            intents.push(world.worker.goal);
+            intents.push(u8::from(world.worker.goal));
             phases.push(phase_id(world.worker.phase));
             if t >= o.ticks {
                 continue; // only the truth of these ticks is needed
@@ -205,7 +205,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                         sp.adj.push(&g.adj)?;
                         let mask: Vec<u8> = (0..n).map(|i| u8::from(i < g.nodes)).collect();
                         sp.mask.push(&mask)?;
-                        sp.label.push(&[world.worker.goal])?;
+                        sp.label.push(&[world.worker.goal.into()])?;
                         sp.episode.push(&[e])?;
                         sp.split.push(&[split(e, o.episodes)])?;
                         sp.robot.push(&[slot as u8])?;
@@ -300,7 +300,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         "floors": o.floors.len(),
         "floor_of_episode": "the (episode mod floors)-th floor the layouts name",
         "split": "by episode index: first 60% train (0), next 20% validation (1), last 20% test (2)",
-        "classes": spwi_proto::STATION_NAMES,
+        "classes": spwi_proto::Station::ALL.map(spwi_proto::Station::name),
         "max_nodes": n,
         "edge_weight": o.edge_weight,
         "gcn": o.gcn.as_ref().map(|file| json!({"file": file})),

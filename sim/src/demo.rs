@@ -83,7 +83,7 @@ pub struct MembersChange {
 
 #[derive(Default)]
 struct Observed {
-    truth: BTreeMap<u64, (u8, Instant)>,
+    truth: BTreeMap<u64, (Station, Instant)>,
     decisions: BTreeMap<u64, BTreeMap<RobotId, (DecisionMsg, Instant)>>,
     votes: BTreeMap<RobotId, VoteMsg>,
     last_truth: Option<TruthMsg>,
@@ -104,13 +104,13 @@ struct PageState {
     fixture_models: bool,
     worker: [f32; 2],
     trail: Vec<[f32; 2]>,
-    truth: u8,
+    truth: Station,
     /// The team's fused worker track (position, velocity, position sigma in m).
     team_track: Option<PageTrack>,
     /// Where the team has mapped each station (class order).
     stations: [Option<[f32; 2]>; NUM_CLASSES],
     robots: Vec<PageRobot>,
-    decision: Option<Vec<u8>>,
+    decision: Option<Vec<Station>>,
     accuracy: f64,
     agreement: f64,
     series: Vec<SeriesPoint>,
@@ -134,7 +134,7 @@ struct PageTrack {
 /// A robot's latest vote as the live views show it.
 #[derive(Serialize, Debug, PartialEq)]
 struct PageVote {
-    class: u8,
+    class: Station,
     confidence: f32,
     visibility: u32,
     /// Ticks between this vote and the tick the team last decided: 0 is a ballot of
@@ -164,14 +164,13 @@ fn current_tick(o: &Observed) -> Option<u64> {
 
 /// The terminal's line for one robot.
 fn vote_line(robot: &RobotId, vote: Option<&PageVote>) -> String {
-    let name = |c: u8| STATION_NAMES.get(c as usize).copied().unwrap_or("?");
     match vote {
         Some(v) if v.age_ticks == 0 => {
-            format!("   {robot:<10} votes {:<14} conf {:.2}  sees {}", name(v.class), v.confidence, v.visibility)
+            format!("   {robot:<10} votes {:<14} conf {:.2}  sees {}", v.class.name(), v.confidence, v.visibility)
         }
         Some(v) => format!(
             "   {robot:<10} no vote this tick (last: {}, {:.1} s ago)",
-            name(v.class),
+            v.class,
             v.age_ticks as f64 * TICK_PERIOD.as_secs_f64()
         ),
         None => format!("   {robot:<10} no vote"),
@@ -245,7 +244,7 @@ fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bo
                 latencies.push(at.saturating_duration_since(*t0).as_secs_f64() * 1e3);
             }
         }
-        let classes: Vec<Option<u8>> = by.values().map(|(d, _)| d.steps.first().map(|s| s.class)).collect();
+        let classes: Vec<Option<Station>> = by.values().map(|(d, _)| d.steps.first().map(|s| s.class)).collect();
         compared += 1;
         agree += u64::from(classes.windows(2).all(|w| w[0] == w[1]));
         // the team's answer: the first robot's decision (they agree on nearly every tick)
@@ -280,7 +279,6 @@ fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bo
 
 fn view(o: &Observed, elapsed: Duration, members: &[RobotId], summary: &Summary) {
     let Some((&tick, &(truth, _))) = o.truth.iter().next_back() else { return };
-    let name = |c: u8| STATION_NAMES.get(c as usize).copied().unwrap_or("?");
     println!("── t = {:>5.1} s  tick {tick}  members {}", elapsed.as_secs_f64(), members.len());
     let current = current_tick(o).unwrap_or(tick);
     for r in members {
@@ -288,11 +286,11 @@ fn view(o: &Observed, elapsed: Duration, members: &[RobotId], summary: &Summary)
     }
     let decided = o.decisions.iter().rev().find_map(|(t, by)| by.values().next().map(|(d, _)| (*t, d.clone())));
     if let Some((t, d)) = decided {
-        let forecast: Vec<&str> = d.steps.iter().skip(1).step_by(5).map(|s| name(s.class)).collect();
-        let now = d.steps.first().map_or("(nobody sees the worker)", |s| name(s.class));
+        let forecast: Vec<&str> = d.steps.iter().skip(1).step_by(5).map(|s| s.class.name()).collect();
+        let now = d.steps.first().map_or("(nobody sees the worker)", |s| s.class.name());
         println!("   team decision (tick {t}): {now}   forecast every 0.5 s: {}", forecast.join(" → "));
     }
-    println!("   truth: heading to {}", name(truth));
+    println!("   truth: heading to {truth}");
     println!(
         "   running accuracy at t {:.0}%, over the horizon {:.0}%, agreement {:.1}%",
         summary.accuracy.t * 100.0,
@@ -566,7 +564,7 @@ mod tests {
     fn a_robot_that_did_not_vote_this_tick_is_shown_with_its_last_vote_and_its_age() {
         let (fresh, quiet, gone) =
             (RobotId::new("r1").unwrap(), RobotId::new("r2").unwrap(), RobotId::new("r3").unwrap());
-        let vote = |robot: &RobotId, tick: u64, class: u8| VoteMsg {
+        let vote = |robot: &RobotId, tick: u64, class: Station| VoteMsg {
             robot: robot.clone(),
             instance: 1,
             tick,
@@ -577,14 +575,18 @@ mod tests {
             signature: Vec::new(),
         };
         let mut o = Observed::default();
-        for v in [vote(&fresh, 100, 2), vote(&quiet, 93, 1), vote(&gone, 100 - SHOWN_VOTE_AGE - 1, 0)] {
+        for v in [
+            vote(&fresh, 100, Station::Assembly),
+            vote(&quiet, 93, Station::Workstation),
+            vote(&gone, 100 - SHOWN_VOTE_AGE - 1, Station::Storage),
+        ] {
             o.votes.insert(v.robot.clone(), v);
         }
         let decision = DecisionMsg {
             robot: fresh.clone(),
             instance: 1,
             tick: 100,
-            steps: vec![TeamStep { class: 2, score: 1.0 }],
+            steps: vec![TeamStep { class: Station::Assembly, score: 1.0 }],
             voters: vec![fresh.clone()],
             live_members: 3,
             decided_by: DecidedBy::AllVoted,

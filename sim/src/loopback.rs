@@ -36,7 +36,7 @@ pub struct FleetOptions {
 #[derive(Debug, Clone, Copy)]
 pub struct Decided {
     /// The team's class at t; `None` when no member saw the worker.
-    pub class: Option<u8>,
+    pub class: Option<Station>,
     pub at: Instant,
     /// Live members the robot counted, itself included.
     pub live_members: u32,

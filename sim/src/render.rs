@@ -14,7 +14,7 @@ use std::path::Path;
 use std::path::PathBuf;
 
 type Rgb = [u8; 3];
-const STATION: [Rgb; 4] = [[184, 134, 11], [31, 119, 180], [44, 160, 44], [214, 39, 40]];
+const STATION: [Rgb; spwi_proto::NUM_CLASSES] = [[184, 134, 11], [31, 119, 180], [44, 160, 44], [214, 39, 40]];
 const WORKER: Rgb = [200, 30, 30];
 const GREY: Rgb = [150, 150, 150];
 const DARK: Rgb = [50, 50, 50];
@@ -76,7 +76,7 @@ impl Canvas {
 }
 
 fn station_colour(class: spwi_proto::ObjectClass) -> Rgb {
-    class.station().map_or(GREY, |s| STATION[s as usize])
+    class.station().map_or(GREY, |s| STATION[s.index()])
 }
 
 /// Draws the world as it is now and the given frames (one per robot slot, in order).
@@ -110,7 +110,7 @@ pub fn render(world: &World, frames: &[(usize, DetectionFrame)], out: &Path) -> 
         }
     }
     for s in &l.stations {
-        let col = STATION[s.id as usize];
+        let col = STATION[s.id.index()];
         for o in &s.objects {
             let f = o.footprint();
             let (a, b) = (to(f.min), to(f.max));
@@ -130,7 +130,7 @@ pub fn render(world: &World, frames: &[(usize, DetectionFrame)], out: &Path) -> 
     }
     let wk = to(world.worker.position);
     let goal = to(l.station(world.worker.goal).work_spot);
-    c.line(wk, goal, STATION[world.worker.goal as usize]);
+    c.line(wk, goal, STATION[world.worker.goal.index()]);
     c.disc(wk.0, wk.1, 0.3 * k, WORKER);
 
     // camera views, scaled to VIEW_W wide

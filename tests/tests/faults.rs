@@ -87,7 +87,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             robot: id("b"),
             instance: 1,
             tick: 1,
-            steps: vec![StepVote { class: 1, confidence: 0.5 }],
+            steps: vec![StepVote { class: Station::Workstation, confidence: 0.5 }],
             visibility: 1,
             trust: 1.0,
             quality: 1.0,

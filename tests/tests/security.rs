@@ -115,7 +115,7 @@ async fn impersonate(session: zenoh::Session, fleet: FleetId, robot: RobotId, pe
         robot: robot.clone(),
         instance: 7,
         tick: 0,
-        steps: vec![StepVote { class: 3, confidence: 1.0 }],
+        steps: vec![StepVote { class: Station::Manufacturing, confidence: 1.0 }],
         visibility: 1000,
         trust: 1.0,
         quality: 1.0,

@@ -14,12 +14,12 @@
 
 use crate::camera::ROBOT_RADIUS;
 use crate::geometry::*;
-use crate::layout::{Camera, CameraPolicy, Floor, Layout, Object, Obstacle, RobotSlot, Station, WORKER_CLEARANCE};
+use crate::layout::{Camera, CameraPolicy, Floor, Layout, Object, Obstacle, RobotSlot, StationSite, WORKER_CLEARANCE};
 use anyhow::{bail, Context, Result};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use spwi_proto::{ObjectClass, NUM_CLASSES, STATION_NAMES};
+use spwi_proto::{ObjectClass, Station};
 use std::f32::consts::PI;
 use std::path::PathBuf;
 
@@ -55,16 +55,16 @@ const TABLE: Template = (ObjectClass::Table, [0.8, 1.2, 0.8]);
 
 /// The objects of station `id` (paper Table I): the main one first (in front of the
 /// work spot), then the others round it. A computer, if any, stands on the desk.
-fn station_objects(id: u8, rng: &mut ChaCha8Rng) -> Vec<Template> {
+fn station_objects(id: Station, rng: &mut ChaCha8Rng) -> Vec<Template> {
     let mut v = match id {
-        0 => {
+        Station::Storage => {
             let mut v = vec![*[PALLET, CRATE].choose(rng).expect("two")];
             for _ in 0..rng.gen_range(1..=4) {
                 v.push(*[PALLET, CRATE, BOX, BOX].choose(rng).expect("four"));
             }
             v
         }
-        1 => {
+        Station::Workstation => {
             let mut v = vec![DESK];
             for (t, p) in [(COMPUTER, 0.8), (CHAIR, 0.8), (DRAWER, 0.7)] {
                 if rng.gen_bool(p) {
@@ -73,12 +73,12 @@ fn station_objects(id: u8, rng: &mut ChaCha8Rng) -> Vec<Template> {
             }
             v
         }
-        2 => {
+        Station::Assembly => {
             let mut v = vec![WORKBENCH];
             v.extend(std::iter::repeat_n(CHAIR, rng.gen_range(0..=2)));
             v
         }
-        _ => {
+        Station::Manufacturing => {
             let mut v = vec![CNC];
             if rng.gen_bool(0.85) {
                 v.push(TABLE);
@@ -118,10 +118,10 @@ fn attempt(rng: &mut ChaCha8Rng) -> Option<Layout> {
 
     // Work spots: a random order of the stations; with a close pair, the second stands
     // 2-3.5 m from the first; every other pair stands at least 5 m apart.
-    let mut order: Vec<u8> = (0..NUM_CLASSES as u8).collect();
+    let mut order = Station::ALL;
     order.shuffle(rng);
     let close_pair = rng.gen_bool(0.5);
-    let mut spots: Vec<(u8, P2)> = Vec::new();
+    let mut spots: Vec<(Station, P2)> = Vec::new();
     for (k, &id) in order.iter().enumerate() {
         let mut placed = None;
         for _ in 0..200 {
@@ -149,7 +149,7 @@ fn attempt(rng: &mut ChaCha8Rng) -> Option<Layout> {
     }
 
     // Objects round each work spot, facing it.
-    let mut objects: Vec<(u8, Object)> = Vec::new();
+    let mut objects: Vec<(Station, Object)> = Vec::new();
     let mut stations = Vec::new();
     for &(id, spot) in &spots {
         let templates = station_objects(id, rng);
@@ -198,7 +198,7 @@ fn attempt(rng: &mut ChaCha8Rng) -> Option<Layout> {
             objects.push((id, o.clone()));
             mine.push(o);
         }
-        stations.push(Station { id, name: STATION_NAMES[id as usize].to_owned(), work_spot: spot, objects: mine });
+        stations.push(StationSite { id, name: id.name().to_owned(), work_spot: spot, objects: mine });
     }
     stations.sort_by_key(|s| s.id);
 

@@ -8,7 +8,7 @@
 use crate::geometry::{Rect, P2};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
-use spwi_proto::{ObjectClass, NUM_CLASSES};
+use spwi_proto::{ObjectClass, Station, NUM_CLASSES};
 use std::path::Path;
 
 /// The default layout, built into the binary.
@@ -19,7 +19,7 @@ pub const DEFAULT_LAYOUT: &str = include_str!("../layouts/factory.toml");
 pub struct Layout {
     pub floor: Floor,
     pub camera: Camera,
-    pub stations: Vec<Station>,
+    pub stations: Vec<StationSite>,
     #[serde(default)]
     pub obstacles: Vec<Obstacle>,
     pub robots: Vec<RobotSlot>,
@@ -68,8 +68,9 @@ impl Camera {
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Station {
-    pub id: u8,
+/// Where one station stands: its work spot and its objects.
+pub struct StationSite {
+    pub id: Station,
     pub name: String,
     /// Where the worker stands to work here.
     pub work_spot: P2,
@@ -204,9 +205,9 @@ impl Layout {
             }
         }
         let blocked = |p: P2| self.obstacles.iter().any(|o| o.rect().inflate(WORKER_CLEARANCE).contains(p));
-        let mut ids: Vec<u8> = self.stations.iter().map(|s| s.id).collect();
+        let mut ids: Vec<usize> = self.stations.iter().map(|s| s.id.index()).collect();
         ids.sort();
-        if ids != (0..NUM_CLASSES as u8).collect::<Vec<_>>() {
+        if ids != (0..NUM_CLASSES).collect::<Vec<_>>() {
             bail!("stations: ids are {ids:?}; exactly one station per class 0..{NUM_CLASSES} is needed");
         }
         for (i, o) in self.obstacles.iter().enumerate() {
@@ -278,7 +279,7 @@ impl Layout {
 
     /// Pairs of stations whose work spots stand within [`CLOSE_PAIR_M`] of each other:
     /// the paper's hard case, reported apart by the evaluation.
-    pub fn close_pairs(&self) -> Vec<(u8, u8)> {
+    pub fn close_pairs(&self) -> Vec<(Station, Station)> {
         let mut pairs = Vec::new();
         for (i, a) in self.stations.iter().enumerate() {
             for b in &self.stations[i + 1..] {
@@ -333,7 +334,7 @@ impl Layout {
         toml::to_string(&v).expect("a layout serialises")
     }
 
-    pub fn station(&self, id: u8) -> &Station {
+    pub fn station(&self, id: Station) -> &StationSite {
         self.stations.iter().find(|s| s.id == id).expect("validated: one station per class")
     }
 }
@@ -342,13 +343,14 @@ impl Layout {
 mod tests {
     use super::*;
     use crate::geometry::dist;
+    use spwi_proto::Station::*;
 
     #[test]
     fn the_default_layout_is_valid_and_has_the_close_pair() {
         let l = Layout::default_layout();
-        let d = crate::geometry::dist(l.station(2).work_spot, l.station(3).work_spot);
+        let d = crate::geometry::dist(l.station(Assembly).work_spot, l.station(Manufacturing).work_spot);
         assert!(d < 3.0, "assembly and manufacturing must stand close: {d} m");
-        assert_eq!(l.close_pairs(), vec![(2, 3)]);
+        assert_eq!(l.close_pairs(), vec![(Assembly, Manufacturing)]);
         assert!(l.robots.len() >= 8);
     }
 
@@ -361,12 +363,14 @@ mod tests {
         for (a, b) in l.robots.iter().zip(&back.robots) {
             assert!(dist(a.spawn, b.spawn) < 1e-4 && (a.heading_deg - b.heading_deg).abs() < 1e-3, "mirroring twice");
         }
-        let spot = |l: &Layout, k: u8| l.station(k).work_spot;
-        for (a, b) in [(0, 1), (1, 2), (2, 3), (0, 3)] {
+        let spot = |l: &Layout, k: Station| l.station(k).work_spot;
+        for (a, b) in
+            [(Storage, Workstation), (Workstation, Assembly), (Assembly, Manufacturing), (Storage, Manufacturing)]
+        {
             let (d, dm) = (dist(spot(&l, a), spot(&l, b)), dist(spot(&m, a), spot(&m, b)));
             assert!((d - dm).abs() < 1e-4, "distance {a}-{b}: {d} vs {dm}");
         }
-        assert!(dist(spot(&l, 0), spot(&m, 0)) > 10.0, "storage moved across the floor");
+        assert!(dist(spot(&l, Storage), spot(&m, Storage)) > 10.0, "storage moved across the floor");
     }
 
     #[test]

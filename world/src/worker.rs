@@ -15,7 +15,7 @@ use crate::geometry::*;
 use crate::layout::{Layout, WORKER_CLEARANCE};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use spwi_proto::{WorkerPhase, NUM_CLASSES};
+use spwi_proto::{Station, WorkerPhase, NUM_CLASSES};
 
 /// Preferred walking speed, m/s.
 pub const SPEED: f32 = 1.2;
@@ -36,7 +36,7 @@ pub struct Worker {
     pub position: P2,
     pub heading: f32,
     pub velocity: P2,
-    pub goal: u8,
+    pub goal: Station,
     pub phase: WorkerPhase,
     /// Seconds left to work at the station (Stationary) or in the transition.
     timer: f32,
@@ -127,7 +127,7 @@ impl Worker {
             position,
             heading: rng.gen_range(-std::f32::consts::PI..std::f32::consts::PI),
             velocity: [0.0, 0.0],
-            goal: 0,
+            goal: Station::Storage,
             phase: WorkerPhase::Moving,
             timer: 0.0,
             change_at: None,
@@ -140,9 +140,9 @@ impl Worker {
         worker
     }
 
-    fn new_trip(&mut self, layout: &Layout, rng: &mut ChaCha8Rng, not: Option<u8>) {
+    fn new_trip(&mut self, layout: &Layout, rng: &mut ChaCha8Rng, not: Option<Station>) {
         self.goal = loop {
-            let g = rng.gen_range(0..NUM_CLASSES as u8);
+            let g = Station::ALL[usize::from(rng.gen_range(0..NUM_CLASSES as u8))];
             if Some(g) != not {
                 break g;
             }

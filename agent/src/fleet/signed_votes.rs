@@ -104,7 +104,7 @@ mod tests {
     use super::super::authority::ThrowawayFleet;
     use super::super::Role;
     use super::*;
-    use spwi_proto::{BallotsMsg, FleetId, StepVote};
+    use spwi_proto::{BallotsMsg, FleetId, Station, StepVote};
 
     fn id(s: &str) -> RobotId {
         RobotId::new(s).unwrap()
@@ -115,7 +115,7 @@ mod tests {
             robot: id(robot),
             instance: 1,
             tick,
-            steps: vec![StepVote { class: 1, confidence }],
+            steps: vec![StepVote { class: Station::Workstation, confidence }],
             visibility: 1,
             trust: 1.0,
             quality: 1.0,
@@ -145,7 +145,7 @@ mod tests {
         assert_eq!(relayed_by_a.votes[0], from_a, "the vote relayed is signed as the vote sent");
 
         // b relays a's vote faithfully, a forged one, an unsigned one, and its own unsigned vote.
-        let forged = VoteMsg { steps: vec![StepVote { class: 2, confidence: 0.9 }], ..from_a.clone() };
+        let forged = VoteMsg { steps: vec![StepVote { class: Station::Assembly, confidence: 0.9 }], ..from_a.clone() };
         let ballots = |votes| Input::Ballots(BallotsMsg { robot: id("b"), instance: 1, tick: 5, votes });
         let mut input = ballots(vec![from_a.clone(), vote("b", 5, 0.5)]);
         assert_eq!(c().check(&mut input), 0);

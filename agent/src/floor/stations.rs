@@ -15,7 +15,7 @@
 //! [`SPOT_SAMPLES`] ticks the station's position is where the worker stood (the mean
 //! of those positions) instead of its objects' centre.
 
-use spwi_proto::{Landmark, WorkerEstimate, NUM_CLASSES};
+use spwi_proto::{Landmark, Station, WorkerEstimate, NUM_CLASSES};
 use std::collections::VecDeque;
 
 /// Landmarks nearer than this (m, plus twice their own sigma) to a cluster join it.
@@ -45,7 +45,7 @@ pub const SPOT_SAMPLES: u32 = 5;
 
 #[derive(Debug, Clone, PartialEq)]
 struct Cluster {
-    station: u8,
+    station: Station,
     sum: [f64; 2],
     weight: f64,
     hits: u32,
@@ -133,7 +133,7 @@ impl StationMap {
             return;
         };
         if !near().any(|(e, other)| other != station && e <= d + AMBIGUOUS_M) {
-            let spot = &mut self.spots[station as usize];
+            let spot = &mut self.spots[station.index()];
             spot.sum[0] += f64::from(w.position[0]);
             spot.sum[1] += f64::from(w.position[1]);
             spot.samples += 1;
@@ -142,14 +142,14 @@ impl StationMap {
 
     /// Where each station stands, for the stations seen often enough.
     pub fn stations(&self) -> [Option<[f32; 2]>; NUM_CLASSES] {
-        std::array::from_fn(|s| self.station(s as u8))
+        Station::ALL.map(|s| self.station(s))
     }
 
     /// Where the worker stands to work at `station`, if it was seen there long enough,
     /// else the centre of the station's objects, if they are on the map.
-    pub fn station(&self, station: u8) -> Option<[f32; 2]> {
+    pub fn station(&self, station: Station) -> Option<[f32; 2]> {
         let objects = self.objects_centre(station)?;
-        let spot = self.spots[station as usize];
+        let spot = self.spots[station.index()];
         if spot.samples >= SPOT_SAMPLES {
             let n = f64::from(spot.samples);
             return Some([(spot.sum[0] / n) as f32, (spot.sum[1] / n) as f32]);
@@ -157,7 +157,7 @@ impl StationMap {
         Some(objects)
     }
 
-    fn objects_centre(&self, station: u8) -> Option<[f32; 2]> {
+    fn objects_centre(&self, station: Station) -> Option<[f32; 2]> {
         let counted = || self.clusters.iter().filter(move |c| c.station == station && c.hits >= MIN_HITS);
         let best = counted().max_by(|a, b| a.hits.cmp(&b.hits).then(b.weight.total_cmp(&a.weight)))?.mean();
         let (mut sum, mut weight) = ([0.0f64; 2], 0.0f64);
@@ -173,8 +173,9 @@ impl StationMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use spwi_proto::Station::*;
 
-    fn lm(station: u8, x: f32, y: f32) -> Landmark {
+    fn lm(station: Station, x: f32, y: f32) -> Landmark {
         Landmark { station, position: [x, y], sigma: 0.3 }
     }
 
@@ -186,8 +187,8 @@ mod tests {
     fn close_pair() -> StationMap {
         let mut m = StationMap::default();
         for _ in 0..MIN_HITS {
-            m.add(&lm(2, 10.0, 11.0));
-            m.add(&lm(3, 12.5, 11.5));
+            m.add(&lm(Assembly, 10.0, 11.0));
+            m.add(&lm(Manufacturing, 12.5, 11.5));
         }
         m
     }
@@ -195,7 +196,7 @@ mod tests {
     #[test]
     fn a_worker_standing_at_a_station_marks_its_work_spot() {
         let mut m = close_pair();
-        assert!(dist(m.station(2).unwrap(), [10.0, 11.0]) < 1e-3, "before: the objects' centre");
+        assert!(dist(m.station(Assembly).unwrap(), [10.0, 11.0]) < 1e-3, "before: the objects' centre");
         // walks in, then works a second and a half in front of the bench, at (10, 10)
         for t in 0..20 {
             m.observe_worker(Some(&worker(8.0 + 0.1 * t as f32, 10.0, 1.0)));
@@ -204,9 +205,9 @@ mod tests {
             let jitter = if t % 2 == 0 { 0.05 } else { -0.05 };
             m.observe_worker(Some(&worker(10.0 + jitter, 10.0, 0.02)));
         }
-        assert!(dist(m.station(2).unwrap(), [10.0, 10.0]) < 0.05, "{:?}", m.station(2));
+        assert!(dist(m.station(Assembly).unwrap(), [10.0, 10.0]) < 0.05, "{:?}", m.station(Assembly));
         assert!(
-            dist(m.station(3).unwrap(), [12.5, 11.5]) < 1e-3,
+            dist(m.station(Manufacturing).unwrap(), [12.5, 11.5]) < 1e-3,
             "the other station of the pair keeps its objects' centre"
         );
     }
@@ -245,14 +246,14 @@ mod tests {
         // a new station comes into view at (8, 3): two objects, seen every tick with noise
         for t in 0..30 {
             let n = ((t * 37 % 11) as f32 - 5.0) * 0.06;
-            m.add(&lm(2, 7.5 + n, 3.0 - n));
-            m.add(&lm(2, 8.5 - n, 3.0 + n));
+            m.add(&lm(Assembly, 7.5 + n, 3.0 - n));
+            m.add(&lm(Assembly, 8.5 - n, 3.0 + n));
             if t + 1 < MIN_HITS as usize {
-                assert_eq!(m.station(2), None, "not before {MIN_HITS} sightings");
+                assert_eq!(m.station(Assembly), None, "not before {MIN_HITS} sightings");
             }
             if t >= 20 {
                 // within two seconds (20 ticks) of coming into view
-                let p = m.station(2).unwrap();
+                let p = m.station(Assembly).unwrap();
                 assert!(dist(p, [8.0, 3.0]) < 0.2, "{p:?}");
             }
         }
@@ -263,12 +264,12 @@ mod tests {
     fn a_one_off_false_positive_stays_off_the_map_and_stations_stay_apart() {
         let mut m = StationMap::default();
         for _ in 0..10 {
-            m.add(&lm(3, 10.0, 10.0));
-            m.add(&lm(2, 12.5, 10.0)); // a close pair, 2.5 m apart
+            m.add(&lm(Manufacturing, 10.0, 10.0));
+            m.add(&lm(Assembly, 12.5, 10.0)); // a close pair, 2.5 m apart
         }
-        m.add(&lm(0, 1.0, 1.0));
-        assert_eq!(m.station(0), None);
-        assert!(dist(m.station(3).unwrap(), [10.0, 10.0]) < 1e-3);
-        assert!(dist(m.station(2).unwrap(), [12.5, 10.0]) < 1e-3);
+        m.add(&lm(Storage, 1.0, 1.0));
+        assert_eq!(m.station(Storage), None);
+        assert!(dist(m.station(Manufacturing).unwrap(), [10.0, 10.0]) < 1e-3);
+        assert!(dist(m.station(Assembly).unwrap(), [12.5, 10.0]) < 1e-3);
     }
 }

@@ -14,7 +14,7 @@ use anyhow::Result;
 use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
 use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
-use spwi_proto::{encode, RobotId, NUM_CLASSES};
+use spwi_proto::{encode, RobotId, Station, NUM_CLASSES};
 use spwi_world::layout::Layout;
 use spwi_world::world::{stream, Stream, World};
 use std::time::Duration;
@@ -174,8 +174,8 @@ pub struct ClosePair {
 }
 
 /// Whether the worker at `at` heads for the farther station of a close pair.
-fn heads_for_farther(at: [f32; 2], goal: u8, pairs: &[(u8, u8)], spots: &[[f32; 2]]) -> bool {
-    let d = |k: u8| spwi_world::geometry::dist(at, spots[k as usize]);
+fn heads_for_farther(at: [f32; 2], goal: Station, pairs: &[(Station, Station)], spots: &[[f32; 2]]) -> bool {
+    let d = |k: Station| spwi_world::geometry::dist(at, spots[k.index()]);
     pairs.iter().any(|&(a, b)| (goal == a && d(a) > d(b)) || (goal == b && d(b) > d(a)))
 }
 
@@ -183,7 +183,7 @@ fn heads_for_farther(at: [f32; 2], goal: u8, pairs: &[(u8, u8)], spots: &[[f32; 
 struct TickRecord {
     per_robot: Vec<(usize, Predictions)>,
     /// Each live robot's team decision (class per step; empty if no votes or none made).
-    decisions: Vec<Vec<u8>>,
+    decisions: Vec<Vec<Station>>,
     /// The worker heads for the farther station of a close pair.
     farther: bool,
 }
@@ -208,10 +208,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let ticks = o.ticks as usize;
     let horizon = o.models.manifest.horizon;
     let mut world = World::new(layout.clone(), o.scenario, episode_seed, n);
-    let spots: Vec<[f32; 2]> = (0..NUM_CLASSES as u8).map(|k| layout.station(k).work_spot).collect();
+    let spots: Vec<[f32; 2]> = Station::ALL.iter().map(|&k| layout.station(k).work_spot).collect();
     let pairs = layout.close_pairs();
-    let in_close_pair: Vec<bool> =
-        (0..NUM_CLASSES as u8).map(|k| pairs.iter().any(|&(a, b)| a == k || b == k)).collect();
+    let in_close_pair = Station::ALL.map(|k| pairs.iter().any(|&(a, b)| a == k || b == k));
     let engines = (0..n).map(|slot| engine(slot, o, layout)).collect::<Result<Vec<_>>>()?;
     let ids: Vec<RobotId> = engines.iter().map(|e| e.config().robot.clone()).collect();
     let mut observers = (0..n)
@@ -264,8 +263,8 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
         // The tick plays out on the bus; the engines' own outputs are what is scored.
         let mut embeddings: Vec<Option<Vec<f32>>> = vec![None; n];
-        let mut votes: Vec<Option<Vec<u8>>> = vec![None; n];
-        let mut decided: Vec<Option<Vec<u8>>> = vec![None; n];
+        let mut votes: Vec<Option<Vec<Station>>> = vec![None; n];
+        let mut decided: Vec<Option<Vec<Station>>> = vec![None; n];
         let (mut messages, mut bytes) = (0, 0);
         let vote_trust = &mut tallies.vote_trust;
         bus.run_until(now + TICK, |slot, _, out| {
@@ -297,7 +296,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             // the team's decision only.
             let seen = embeddings[slot].is_some();
             let mut p = obs.predict(tick, embeddings[slot].take(), bus.engine(slot).floor(), &spots)?;
-            p.gnn = bus.engine(slot).spatial_logits(tick).map(|l| vote::argmax(&l) as u8);
+            p.gnn = bus.engine(slot).spatial_logits(tick).map(|l| Station::ALL[vote::argmax(&l)]);
             p.collective = votes[slot].take().filter(|_| seen);
             per_robot.push((slot, p));
             decisions.push(decided[slot].take().unwrap_or_default());
@@ -309,7 +308,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     // Score now that the truth of every horizon is known.
     for (t, rec) in records.iter().enumerate() {
         let truth = &intents[t..=t + horizon];
-        let close = in_close_pair[truth[0] as usize];
+        let close = in_close_pair[truth[0].index()];
         for (slot, p) in &rec.per_robot {
             let pr = &mut tallies.per_robot[*slot];
             if let Some(g) = p.gnn {
@@ -360,14 +359,20 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
         tallies.ticks += 1;
         for d in &rec.decisions {
-            let undecided = vec![u8::MAX; horizon + 1]; // matches no class
-            let d = if d.is_empty() { &undecided } else { d };
-            tallies.team_all_ticks.add(d, truth);
-            if close {
-                tallies.close_pair.team_all_ticks.add(d, truth);
+            // A robot that decided nothing for the tick is wrong at every step.
+            if d.is_empty() {
+                tallies.team_all_ticks.add_none(truth.len());
+                if close {
+                    tallies.close_pair.team_all_ticks.add_none(truth.len());
+                }
+            } else {
+                tallies.team_all_ticks.add(d, truth);
+                if close {
+                    tallies.close_pair.team_all_ticks.add(d, truth);
+                }
             }
         }
-        let decided: Vec<&Vec<u8>> = rec.decisions.iter().filter(|d| !d.is_empty()).collect();
+        let decided: Vec<&Vec<Station>> = rec.decisions.iter().filter(|d| !d.is_empty()).collect();
         if !decided.is_empty() {
             tallies.decided_ticks += 1;
             let all_same = decided.len() == rec.decisions.len() && decided.iter().all(|d| d[0] == decided[0][0]);
@@ -396,14 +401,15 @@ fn encoded_len(o: &Output) -> usize {
 #[cfg(test)]
 mod tests {
     use super::heads_for_farther;
+    use spwi_proto::Station::*;
 
     #[test]
     fn the_farther_station_of_a_pair_is_the_one_the_walk_reaches_second() {
         let spots = [[0.0, 0.0], [10.0, 0.0], [12.5, 0.0], [5.0, 9.0]];
-        let pairs = [(1, 2)];
-        assert!(heads_for_farther([2.0, 0.0], 2, &pairs, &spots), "past 1 to reach 2");
-        assert!(!heads_for_farther([2.0, 0.0], 1, &pairs, &spots), "1 is the nearer");
-        assert!(heads_for_farther([20.0, 0.0], 1, &pairs, &spots), "from the other side, 1 is farther");
-        assert!(!heads_for_farther([2.0, 0.0], 3, &pairs, &spots), "3 is in no close pair");
+        let pairs = [(Workstation, Assembly)];
+        assert!(heads_for_farther([2.0, 0.0], Assembly, &pairs, &spots), "past 1 to reach 2");
+        assert!(!heads_for_farther([2.0, 0.0], Workstation, &pairs, &spots), "1 is the nearer");
+        assert!(heads_for_farther([20.0, 0.0], Workstation, &pairs, &spots), "from the other side, 1 is farther");
+        assert!(!heads_for_farther([2.0, 0.0], Manufacturing, &pairs, &spots), "3 is in no close pair");
     }
 }

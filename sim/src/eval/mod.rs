@@ -34,7 +34,7 @@ use serde::Serialize;
 use spwi_agent::config::TickConfig;
 use spwi_agent::manifest::Manifest;
 use spwi_agent::model::ModelSet;
-use spwi_proto::{NUM_CLASSES, STATION_NAMES};
+use spwi_proto::Station;
 use spwi_world::generate::NamedLayout;
 use spwi_world::world::Scenario;
 use std::collections::{BTreeMap, BTreeSet};
@@ -164,17 +164,17 @@ pub struct StationPlacement {
 }
 
 fn placements(q: &fleet::MapQuality) -> Vec<StationPlacement> {
-    (0..NUM_CLASSES)
-        .map(|k| {
-            let n = q.mapped[k];
+    Station::ALL
+        .map(|s| {
+            let (k, n) = (s.index(), q.mapped[s.index()]);
             StationPlacement {
-                station: STATION_NAMES[k],
+                station: s.name(),
                 mapped: n as f64 / q.robot_ticks.max(1) as f64,
                 mean_error_m: (n > 0).then(|| q.error_sum[k] / n as f64),
                 far: (n > 0).then(|| q.far[k] as f64 / n as f64),
             }
         })
-        .collect()
+        .to_vec()
 }
 
 /// Refuses an evaluation whose episodes include any the models were trained on.
@@ -565,16 +565,16 @@ mod tests {
     #[test]
     fn consensus_figures_match_a_hand_computed_case() {
         use spwi_agent::consensus::{decide, Ballot, Rule, Weights};
-        use spwi_proto::{RobotId, StepVote};
+        use spwi_proto::{RobotId, Station::*, StepVote};
         // Robot a sees 3 detections and says 2 (confidence 0.9); b sees 1 and says 1 (0.6);
         // c sees 4 and says 1 (0.3). α = β = 0.5:
         //   ṽ = 3/8, 1/8, 4/8;  c̃ = 0.9/1.8, 0.6/1.8, 0.3/1.8
         //   score(2) = 0.5·3/8 + 0.5·0.5 = 0.4375; score(1) = 0.5·5/8 + 0.5·0.5 = 0.5625
         let ids: Vec<RobotId> = ["a", "b", "c"].iter().map(|s| RobotId::new(*s).unwrap()).collect();
         let votes = [
-            [StepVote { class: 2, confidence: 0.9 }],
-            [StepVote { class: 1, confidence: 0.6 }],
-            [StepVote { class: 1, confidence: 0.3 }],
+            [StepVote { class: Assembly, confidence: 0.9 }],
+            [StepVote { class: Workstation, confidence: 0.6 }],
+            [StepVote { class: Workstation, confidence: 0.3 }],
         ];
         let mut ballots: Vec<Ballot<'_>> = [3, 1, 4]
             .iter()
@@ -583,11 +583,11 @@ mod tests {
             .map(|((&visibility, robot), steps)| Ballot { robot, visibility, trust: 1.0, quality: 1.0, steps })
             .collect();
         let d = decide(&mut ballots, Rule::Paper(Weights { alpha: 0.5, beta: 0.5 }));
-        assert_eq!(d[0].class, 1);
+        assert_eq!(d[0].class, Workstation);
         assert!((d[0].score - 0.5625).abs() < 1e-6);
         let mut t = score::Tally::default();
-        t.add(&[d[0].class], &[1]);
-        t.add(&[2], &[1]);
+        t.add(&[d[0].class], &[Workstation]);
+        t.add(&[Assembly], &[Workstation]);
         assert_eq!(estimate(&[t]).t, 0.5);
     }
 }

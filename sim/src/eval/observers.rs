@@ -13,7 +13,7 @@ use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Inference, Input, ModelSet, Runner};
 use spwi_agent::temporal::{frame_offsets, normalise_keypoints, Row, RowLayout, TemporalModel, Window, CNN1D_DIM};
 use spwi_agent::vote;
-use spwi_proto::{DetectionFrame, NUM_CLASSES};
+use spwi_proto::{DetectionFrame, Station, NUM_CLASSES};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -21,16 +21,16 @@ use std::sync::Arc;
 #[derive(Debug, Clone, Default)]
 pub struct Predictions {
     /// The engine's GCN alone.
-    pub gnn: Option<u8>,
-    /// Class for t and each future step.
-    pub ego: Option<Vec<u8>>,
+    pub gnn: Option<Station>,
+    /// Station for t and each future step.
+    pub ego: Option<Vec<Station>>,
     /// The engine's vote (its collective GRU).
-    pub collective: Option<Vec<u8>>,
-    pub cnn1d: Option<Vec<u8>>,
+    pub collective: Option<Vec<Station>>,
+    pub cnn1d: Option<Vec<Station>>,
     /// The constant-velocity model given the true work spots.
-    pub cvm: Option<Vec<u8>>,
+    pub cvm: Option<Vec<Station>>,
     /// The same model given only the stations the team mapped (what our models get).
-    pub cvm_mapped: Option<Vec<u8>>,
+    pub cvm_mapped: Option<Vec<Station>>,
     /// Where the robot's team map put each station at this tick, as the distance from
     /// the station's true work spot (m); `None`: not on the map.
     pub map_error: [Option<f32>; NUM_CLASSES],
@@ -38,8 +38,8 @@ pub struct Predictions {
 
 impl Predictions {
     /// Whether the robot's team map held station `k` at this tick.
-    pub fn mapped(&self, k: u8) -> bool {
-        self.map_error[k as usize].is_some()
+    pub fn mapped(&self, k: Station) -> bool {
+        self.map_error[k.index()].is_some()
     }
 }
 
@@ -60,8 +60,8 @@ pub struct Observers {
     horizon: usize,
 }
 
-fn classes(logits: &[[f32; NUM_CLASSES]]) -> Vec<u8> {
-    logits.iter().map(|z| vote::argmax(z) as u8).collect()
+fn classes(logits: &[[f32; NUM_CLASSES]]) -> Vec<Station> {
+    logits.iter().map(|z| Station::ALL[vote::argmax(z)]).collect()
 }
 
 impl Observers {
@@ -142,14 +142,14 @@ impl Observers {
                 z[0].chunks_exact(NUM_CLASSES).map(|c| c.try_into().expect("chunk of 4")).collect();
             out.cnn1d = Some(classes(&logits));
         }
-        out.cvm = self.cvm.predict(station_spots).map(|k| vec![k as u8; self.horizon + 1]);
-        let team: Vec<(u8, [f32; 2])> =
-            (0..NUM_CLASSES as u8).filter_map(|k| floor_view.team_map.station(k).map(|at| (k, at))).collect();
+        out.cvm = self.cvm.predict(station_spots).map(|k| vec![Station::ALL[k]; self.horizon + 1]);
+        let team: Vec<(Station, [f32; 2])> =
+            Station::ALL.into_iter().filter_map(|k| floor_view.team_map.station(k).map(|at| (k, at))).collect();
         let spots: Vec<[f32; 2]> = team.iter().map(|&(_, at)| at).collect();
         out.cvm_mapped = self.cvm.predict(&spots).map(|i| vec![team[i].0; self.horizon + 1]);
         for &(k, at) in &team {
-            let spot = station_spots[k as usize];
-            out.map_error[k as usize] = Some(spwi_world::geometry::dist(at, spot));
+            let spot = station_spots[k.index()];
+            out.map_error[k.index()] = Some(spwi_world::geometry::dist(at, spot));
         }
         Ok(out)
     }

@@ -1,7 +1,7 @@
 //! Tallies of predictions against the truth, and the figures the report shows.
 
 use serde::Serialize;
-use spwi_proto::NUM_CLASSES;
+use spwi_proto::{Station, NUM_CLASSES};
 
 /// Accuracy at t and averaged over t+1 … t+H, as fractions 0–1, each with its 95 %
 /// bootstrap confidence interval by episode (see [`estimate`]).
@@ -63,7 +63,7 @@ impl Tally {
     pub const EMPTY: Tally = Tally { hits_t: 0, n_t: 0, hits_future: 0, n_future: 0 };
 
     /// `pred[h]` is the class predicted for t+h, `truth[h]` the true intent at t+h.
-    pub fn add(&mut self, pred: &[u8], truth: &[u8]) {
+    pub fn add<T: PartialEq>(&mut self, pred: &[T], truth: &[T]) {
         for (h, (p, y)) in pred.iter().zip(truth).enumerate() {
             let hit = u64::from(p == y);
             if h == 0 {
@@ -73,6 +73,14 @@ impl Tally {
                 self.hits_future += hit;
                 self.n_future += 1;
             }
+        }
+    }
+
+    /// A tick without a prediction, `steps` long: every step scored wrong.
+    pub fn add_none(&mut self, steps: usize) {
+        if steps > 0 {
+            self.n_t += 1;
+            self.n_future += steps as u64 - 1;
         }
     }
 
@@ -97,8 +105,8 @@ impl Tally {
 /// Counts of (true class, predicted class) at t.
 pub type Confusion = [[u64; NUM_CLASSES]; NUM_CLASSES];
 
-pub fn confuse(c: &mut Confusion, pred: u8, truth: u8) {
-    c[truth as usize][pred as usize] += 1;
+pub fn confuse(c: &mut Confusion, pred: Station, truth: Station) {
+    c[truth.index()][pred.index()] += 1;
 }
 
 #[cfg(test)]
@@ -115,6 +123,9 @@ mod tests {
         assert_eq!(a.future, Some(0.75));
         assert_eq!(estimate(&[]).t, 0.0);
         assert_eq!(estimate(&[Tally::default()]).future, None);
+        t.add_none(3); // no prediction: wrong at t and at both future steps
+        let a = estimate(&[t]);
+        assert!((a.t - 1.0 / 3.0).abs() < 1e-12 && a.future == Some(0.5), "{a:?}");
     }
 
     #[test]

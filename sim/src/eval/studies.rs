@@ -101,6 +101,17 @@ fn load(root: &Path, window: usize, horizon: usize, frames: Option<usize>) -> Re
     ModelSet::load(&find_model_set(root, window, horizon, frames)?, Backend::Tract, None)
 }
 
+/// The model sets of `reports`, each once, in order, as `a`, `b`.
+fn set_names(reports: &[Report]) -> String {
+    let mut names: Vec<&str> = Vec::new();
+    for r in reports {
+        if !names.contains(&r.model_set.as_str()) {
+            names.push(&r.model_set);
+        }
+    }
+    names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", ")
+}
+
 pub fn run_all(s: &Settings) -> Result<Studies> {
     let default = load(&s.models_root, 20, 20, None)?;
     let one_with = |scenario: u8,
@@ -359,6 +370,11 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
     );
     let _ = write!(w, "{}", figure("robots.png", "accuracy against the number of robots"));
     let _ = writeln!(w, "\n## Time horizons (scenario 3) — paper Fig. 4: more past helps\n");
+    let _ = writeln!(
+        w,
+        "Model sets: {} (models/README.md: the same design and data, other windows).\n",
+        set_names(&st.horizons)
+    );
     let _ = writeln!(w, "| past → future | robots | collective t | collective t+1…H | ego t | team, all ticks |");
     let _ = writeln!(w, "|---|---|---|---|---|---|");
     for r in &st.horizons {
@@ -375,6 +391,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
     }
     let _ = write!(w, "{}", figure("horizons.png", "time horizons"));
     let _ = writeln!(w, "\n## Temporal resolution (scenario 3, 3 robots, 1 s → 1 s) — paper Fig. 6\n");
+    let _ = writeln!(w, "Model sets: {}.\n", set_names(&st.resolution));
     let _ = writeln!(w, "| frames of the last second | ego t | collective t | collective t+1…H | consensus t |");
     let _ = writeln!(w, "|---|---|---|---|---|");
     for r in &st.resolution {
