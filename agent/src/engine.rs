@@ -1081,8 +1081,9 @@ pub(crate) mod tests {
         assert!(e.embedding.is_none() && e.worker.is_some() && e.votes, "{e:?}");
         take_vote(&out);
         assert!(!decisions(&out)[0].steps.is_empty(), "the team still has an answer");
-        // More than a second without the worker: the track is stale, no vote.
-        let out = a.handle(Input::Frame(localised(4 + 11, false)), ms(1500));
+        // Longer than FRESH_TICKS without the worker: the track is stale, no vote.
+        let stale = 3 + floor::track::FRESH_TICKS + 1;
+        let out = a.handle(Input::Frame(localised(stale, false)), ms(100 * stale));
         let e = take_embedding(&out);
         assert!(e.worker.is_none() && !e.votes);
         assert!(out.iter().all(|o| !matches!(o, Output::Vote(_))));
@@ -1090,7 +1091,7 @@ pub(crate) mod tests {
         let mut b = engine("b", &set);
         b.handle(Input::MemberJoined(id("a")), ms(0));
         let announce = |votes| EmbeddingMsg { votes, ..e.clone() };
-        b.handle(Input::Embedding(announce(false)), ms(1500)); // a is now an active member
+        b.handle(Input::Embedding(EmbeddingMsg { tick: 15, ..announce(false) }), ms(1500)); // a is now an active member
         b.handle(Input::Embedding(EmbeddingMsg { tick: 20, ..announce(true) }), ms(1900));
         let out = b.handle(Input::Frame(DetectionFrame { robot: id("b"), ..localised(20, true) }), ms(1900));
         take_vote(&out);

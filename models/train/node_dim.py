@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Names the GCN's node dimension ("nodes") instead of fixing it at max_nodes.
+"""Names the GCN's node dimension ("nodes") instead of fixing it at max_nodes, or
+fixes it again.
 
 A GCN whose inputs are x [1, nodes, 1024] and adj [1, nodes, nodes] is fed only the
 graph's real nodes (the worker and the objects seen, usually 2 to 5) instead of all
@@ -10,31 +11,69 @@ fixed in others.
 
 export.py applies it to every GCN it exports. Run on existing files (onnx only):
     python3 models/train/node_dim.py models/default/gcn.onnx ...
+The daemon also runs a GCN that fixes the count (it then pads every graph to it), as
+a model from elsewhere may; the study sets ship that way so that the golden tests cover
+both. `--fixed N SET_DIR ...` fixes it at N in a set's gcn.onnx and its manifest:
+    python3 models/train/node_dim.py --fixed 16 models/w10-h10
 """
+import json
+import os
 import sys
 
 import onnx
 
 NAME = "nodes"
+AXES = {"x": (1,), "adj": (1, 2)}
 
 
-def name_node_dim(model):
-    """Names dimension 1 of x and dimensions 1 and 2 of adj, in place."""
-    axes = {"x": (1,), "adj": (1, 2)}
+def set_node_dim(model, size=None):
+    """Names (size None) or fixes at `size` dimension 1 of x and dimensions 1 and 2 of
+    adj, in place."""
     for i in model.graph.input:
-        for axis in axes.get(i.name, ()):
+        for axis in AXES.get(i.name, ()):
             dim = i.type.tensor_type.shape.dim[axis]
             dim.Clear()
-            dim.dim_param = NAME
-    missing = set(axes) - {i.name for i in model.graph.input}
+            if size is None:
+                dim.dim_param = NAME
+            else:
+                dim.dim_value = size
+    missing = set(AXES) - {i.name for i in model.graph.input}
     if missing:
         raise SystemExit(f"not a GCN: no input named {sorted(missing)}")
-    del model.graph.value_info[:]  # shapes inferred for the fixed size no longer hold
+    del model.graph.value_info[:]  # shapes inferred for another size no longer hold
     onnx.checker.check_model(model, full_check=True)
 
 
+def name_node_dim(model):
+    set_node_dim(model)
+
+
+def fix_set(set_dir, size):
+    """Fixes the node count of the GCN of the model set in `set_dir` (file and manifest)."""
+    path = os.path.join(set_dir, "gcn.onnx")
+    m = onnx.load(path)
+    set_node_dim(m, size)
+    onnx.save(m, path)
+    manifest_path = os.path.join(set_dir, "manifest.json")
+    with open(manifest_path) as f:
+        manifest = json.load(f)
+    for i in manifest["models"]["gcn"]["inputs"]:
+        for axis in AXES[i["name"]]:
+            i["shape"][axis] = size
+    with open(manifest_path, "w") as f:
+        json.dump(manifest, f, indent=2)
+        f.write("\n")
+    print(f"{set_dir}: GCN node count fixed at {size}")
+
+
 def main():
-    for path in sys.argv[1:]:
+    args = sys.argv[1:]
+    if args[:1] == ["--fixed"]:
+        size = int(args[1])
+        for set_dir in args[2:]:
+            fix_set(set_dir, size)
+        return
+    for path in args:
         m = onnx.load(path)
         name_node_dim(m)
         onnx.save(m, path)

@@ -12,8 +12,13 @@ use spwi_proto::WorkerEstimate;
 pub const TICK_S: f32 = spwi_proto::TICK_PERIOD.as_secs_f32();
 /// A gap longer than this (2 s) restarts the track.
 pub const MAX_GAP_TICKS: u64 = 20;
-/// An estimate is shared while the last measurement is at most this old (1 s).
-pub const FRESH_TICKS: u64 = 10;
+/// An estimate is shared, and the robot votes from it, while the last measurement is
+/// at most this old (3 s): its covariance grows meanwhile, so the team's fusion weighs
+/// it down against any fresh view. Measured on the training floors with other seeds
+/// (`spwi-sim eval --layouts train:0..300 --seed 7000 --camera track`, 200 episodes,
+/// the models of the day): 1 s → 3 s raised the team's accuracy over all ticks from
+/// 77.7 to 78.7 % with the decisions on ticks someone sees the worker unchanged.
+pub const FRESH_TICKS: u64 = 30;
 /// Process noise: the worker's acceleration spectral density, (m/s²)² per s.
 const Q: f32 = 0.5;
 /// Velocity variance of a new track (m²/s²): walking speed is unknown at first.
