@@ -43,6 +43,11 @@ pub fn argmax(xs: &[f32]) -> usize {
     best
 }
 
+/// The station of the largest score; the lowest index wins a tie.
+pub fn top_station(scores: &[f32; NUM_CLASSES]) -> Station {
+    Station::ALL[argmax(scores)]
+}
+
 /// One [`StepVote`] per row of logits (row 0 = t).
 pub fn vote(logits: &[[f32; NUM_CLASSES]], temperature: f32) -> Vec<StepVote> {
     logits

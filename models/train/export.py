@@ -15,7 +15,7 @@ import onnx
 import onnxruntime as ort
 import torch
 
-from node_dim import name_node_dim
+from node_dim import set_node_dim
 
 OPSET = 17
 IR_VERSION = 8
@@ -33,7 +33,7 @@ def export(model, inputs, input_names, output_names, path, named_nodes=False):
     m = onnx.load(path)
     m.ir_version = IR_VERSION
     if named_nodes:
-        name_node_dim(m)
+        set_node_dim(m)
     onnx.checker.check_model(m, full_check=True)
     for node in m.graph.node:
         if node.op_type == "GRU":

@@ -44,10 +44,6 @@ def set_node_dim(model, size=None):
     onnx.checker.check_model(model, full_check=True)
 
 
-def name_node_dim(model):
-    set_node_dim(model)
-
-
 def fix_set(set_dir, size):
     """Fixes the node count of the GCN of the model set in `set_dir` (file and manifest)."""
     path = os.path.join(set_dir, "gcn.onnx")
@@ -75,7 +71,7 @@ def main():
         return
     for path in args:
         m = onnx.load(path)
-        name_node_dim(m)
+        set_node_dim(m)
         onnx.save(m, path)
         print(f"{path}: node dimension named {NAME!r}")
 

@@ -208,7 +208,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let ticks = o.ticks as usize;
     let horizon = o.models.manifest.horizon;
     let mut world = World::new(layout.clone(), o.scenario, episode_seed, n);
-    let spots: Vec<[f32; 2]> = Station::ALL.iter().map(|&k| layout.station(k).work_spot).collect();
+    let spots = Station::ALL.map(|k| layout.station(k).work_spot);
     let pairs = layout.close_pairs();
     let in_close_pair = Station::ALL.map(|k| pairs.iter().any(|&(a, b)| a == k || b == k));
     let engines = (0..n).map(|slot| engine(slot, o, layout)).collect::<Result<Vec<_>>>()?;
@@ -296,7 +296,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             // the team's decision only.
             let seen = embeddings[slot].is_some();
             let mut p = obs.predict(tick, embeddings[slot].take(), bus.engine(slot).floor(), &spots)?;
-            p.gnn = bus.engine(slot).spatial_logits(tick).map(|l| Station::ALL[vote::argmax(&l)]);
+            p.gnn = bus.engine(slot).spatial_logits(tick).map(|l| vote::top_station(&l));
             p.collective = votes[slot].take().filter(|_| seen);
             per_robot.push((slot, p));
             decisions.push(decided[slot].take().unwrap_or_default());
@@ -360,16 +360,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         tallies.ticks += 1;
         for d in &rec.decisions {
             // A robot that decided nothing for the tick is wrong at every step.
-            if d.is_empty() {
-                tallies.team_all_ticks.add_none(truth.len());
-                if close {
-                    tallies.close_pair.team_all_ticks.add_none(truth.len());
-                }
-            } else {
-                tallies.team_all_ticks.add(d, truth);
-                if close {
-                    tallies.close_pair.team_all_ticks.add(d, truth);
-                }
+            tallies.team_all_ticks.add_or_miss(d, truth);
+            if close {
+                tallies.close_pair.team_all_ticks.add_or_miss(d, truth);
             }
         }
         let decided: Vec<&Vec<Station>> = rec.decisions.iter().filter(|d| !d.is_empty()).collect();

@@ -61,7 +61,7 @@ pub struct Observers {
 }
 
 fn classes(logits: &[[f32; NUM_CLASSES]]) -> Vec<Station> {
-    logits.iter().map(|z| Station::ALL[vote::argmax(z)]).collect()
+    logits.iter().map(vote::top_station).collect()
 }
 
 impl Observers {

@@ -76,11 +76,15 @@ impl Tally {
         }
     }
 
-    /// A tick without a prediction, `steps` long: every step scored wrong.
-    pub fn add_none(&mut self, steps: usize) {
-        if steps > 0 {
+    /// [`Tally::add`], except that no prediction (`pred` empty) is wrong at every step
+    /// of `truth`: how a tick the team left undecided counts.
+    pub fn add_or_miss<T: PartialEq>(&mut self, pred: &[T], truth: &[T]) {
+        if !pred.is_empty() {
+            return self.add(pred, truth);
+        }
+        if let Some(future) = truth.len().checked_sub(1) {
             self.n_t += 1;
-            self.n_future += steps as u64 - 1;
+            self.n_future += future as u64;
         }
     }
 
@@ -123,7 +127,7 @@ mod tests {
         assert_eq!(a.future, Some(0.75));
         assert_eq!(estimate(&[]).t, 0.0);
         assert_eq!(estimate(&[Tally::default()]).future, None);
-        t.add_none(3); // no prediction: wrong at t and at both future steps
+        t.add_or_miss(&[], &[1, 2, 2]); // no prediction: wrong at t and at both future steps
         let a = estimate(&[t]);
         assert!((a.t - 1.0 / 3.0).abs() < 1e-12 && a.future == Some(0.5), "{a:?}");
     }
