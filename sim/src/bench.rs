@@ -9,7 +9,7 @@
 //! `--secured` runs the fleet as deployed outside development: a fresh fleet directory
 //! (CA, the world, one identity per agent), mutual TLS and access control on every link.
 
-use crate::demo::percentile;
+use crate::loopback::percentile;
 use crate::loopback::{layout_with_slots, FleetOptions, LoopbackFleet, Usage};
 use anyhow::Result;
 use serde::Serialize;
@@ -80,8 +80,8 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         let now = Instant::now();
         if measure_from.is_none() && now - started >= warmup {
             cpu0 = (0..robots).map(|slot| fleet.usage(slot).cpu_s).collect();
-            let mut st = fleet.seen.lock().expect("fleet observer");
-            (st.messages, st.bytes) = (0, 0);
+            let mut traffic = fleet.traffic.lock().expect("traffic");
+            (traffic.messages, traffic.bytes) = (0, 0);
             measure_from = Some((now, world.tick + 1));
         }
         if measure_from.is_some_and(|(t, _)| now - t >= o.duration) {
@@ -92,9 +92,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         published.insert(t, fleet.publish(&mut world).await?);
         if o.free_running {
             let deadline = published[&t] + Duration::from_millis(200);
-            while Instant::now() < deadline
-                && fleet.seen.lock().expect("fleet observer").decisions.get(&t).is_none_or(|d| d.len() < robots)
-            {
+            while Instant::now() < deadline && fleet.decisions.lock().get(&t).is_none_or(|d| d.len() < robots) {
                 tokio::time::sleep(Duration::from_micros(200)).await;
             }
         } else {
@@ -106,23 +104,26 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let elapsed = measured_since.elapsed().as_secs_f64();
     tokio::time::sleep(Duration::from_millis(300)).await; // the last decisions
     let usage: Vec<Usage> = (0..robots).map(|slot| fleet.usage(slot)).collect();
-    let seen = fleet.seen.clone();
+    let decisions = std::mem::take(&mut *fleet.decisions.lock());
+    let (messages, bytes) = {
+        let traffic = fleet.traffic.lock().expect("traffic");
+        (traffic.messages, traffic.bytes)
+    };
     drop(fleet);
 
-    let st = seen.lock().expect("fleet observer");
     let last_tick = world.tick;
     let ticks = last_tick + 1 - first_tick;
     let (mut latencies, mut agreed, mut complete, mut incomplete) = (Vec::new(), 0u64, 0u64, 0u64);
     for t in first_tick..=last_tick {
-        let Some(d) = st.decisions.get(&t).filter(|d| d.len() == robots) else {
+        let Some(d) = decisions.get(&t).filter(|d| d.len() == robots) else {
             incomplete += 1;
             continue;
         };
         complete += 1;
         let last = d.values().map(|d| d.at).max().expect("robots > 0");
         latencies.push((last - published[&t]).as_secs_f64() * 1e3);
-        let first = d.values().next().expect("robots > 0").class;
-        agreed += u64::from(d.values().all(|d| d.class == first));
+        let first = d.values().next().expect("robots > 0").class();
+        agreed += u64::from(d.values().all(|d| d.class() == first));
     }
     latencies.sort_by(f64::total_cmp);
     let n = robots as f64;
@@ -137,8 +138,8 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         incomplete_ticks: incomplete,
         cpu_per_agent: usage.iter().zip(&cpu0).map(|(u, c0)| (u.cpu_s - c0) / elapsed).sum::<f64>() / n,
         rss_mb_per_agent: usage.iter().map(|u| u.rss_mb).sum::<f64>() / n,
-        msgs_per_tick_per_robot: st.messages as f64 / ticks as f64 / n,
-        bytes_per_tick_per_robot: st.bytes as f64 / ticks as f64 / n,
+        msgs_per_tick_per_robot: messages as f64 / ticks as f64 / n,
+        bytes_per_tick_per_robot: bytes as f64 / ticks as f64 / n,
     })
 }
 

@@ -4,17 +4,16 @@
 //! sums it up at the end. `--kill-after` / `--join-after` remove and add an agent
 //! while it runs, so membership changes can be watched.
 
+use crate::loopback::{percentile, Hub, InProcessAgent};
 use crate::service::{self, WorldOptions};
 use crate::world_args::WorldArgs;
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, Result};
 use serde::Serialize;
 use spwi_agent::cli::{init_tracing, spawn_signal_handler};
 use spwi_agent::config::AgentConfig;
 use spwi_agent::config::LogFormat;
-use spwi_agent::daemon::{self, Options};
 use spwi_agent::floor::{self, StationMap};
 use spwi_agent::model::ModelSet;
-use spwi_agent::zenoh_config;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
 use spwi_world::layout::Layout;
@@ -224,14 +223,6 @@ fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoi
     })
 }
 
-/// The `q` quantile of sorted values (nearest rank); 0 for none.
-pub(crate) fn percentile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)]
-}
-
 fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bool) -> Summary {
     let mut decisions: BTreeMap<String, u64> = BTreeMap::new();
     let (mut agree, mut compared, mut correct, mut judged, mut fut_ok, mut fut_n) =
@@ -299,9 +290,12 @@ fn view(o: &Observed, elapsed: Duration, members: &[RobotId], summary: &Summary)
     );
 }
 
+fn robot_id(i: usize) -> Result<RobotId> {
+    Ok(RobotId::new(format!("robot{i}"))?)
+}
+
 /// Runs the demo and returns its summary.
 pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::Receiver<bool>) -> Result<Summary> {
-    let fleet = FleetId::new("demo")?;
     let (web_stop, web_rx) = watch::channel(false);
     let mut web = None;
     if let Some(addr) = opts.http {
@@ -314,13 +308,13 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
         }
         web = Some(w);
     }
-    let observer = zenoh::open(zenoh_config::loopback_peer(&[])?).await.map_err(|e| anyhow!(e))?;
-    let locator = observer.info().locators().await.into_iter().next().context("observer listens nowhere")?.to_string();
-    let peer = || zenoh_config::loopback_peer(std::slice::from_ref(&locator));
+    let hub = Hub::start("demo").await?;
+    let fleet = hub.fleet.clone();
     let observed = Arc::new(Mutex::new(Observed::default()));
     let o = observed.clone();
     let f = fleet.clone();
-    let _all = observer
+    let _all = hub
+        .session
         .declare_subscriber(keys::everything(&fleet))
         .callback(move |s| {
             let key = s.key_expr().as_str().to_owned();
@@ -366,22 +360,9 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
         .await
         .map_err(|e| anyhow!(e))?;
 
-    let start_agent = |i: usize| -> Result<(RobotId, watch::Sender<bool>, tokio::task::JoinHandle<Result<()>>)> {
-        let robot = RobotId::new(format!("robot{i}"))?;
-        let (tx, rx) = watch::channel(false);
-        let options = Options {
-            robot: robot.clone(),
-            fleet: fleet.clone(),
-            config: opts.agent.clone(),
-            zenoh: peer()?,
-            record: None,
-            credentials: None,
-        };
-        Ok((robot, tx, tokio::spawn(daemon::run(options, models.clone(), rx, None))))
-    };
     let mut agents = Vec::new();
     for i in 0..opts.robots {
-        agents.push(start_agent(i)?);
+        agents.push(InProcessAgent::start(&hub, &robot_id(i)?, &models, opts.agent.clone()).await?);
     }
     let (world_stop, world_rx) = watch::channel(false);
     let world = tokio::spawn(service::run(
@@ -390,7 +371,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
             scenario: opts.scenario,
             seed: opts.seed,
             layout: opts.layout.clone(),
-            zenoh: peer()?,
+            zenoh: hub.peer_config()?,
             tick: TICK_PERIOD,
             stuck_slot: None,
         },
@@ -415,16 +396,22 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
         let elapsed = started.elapsed();
         if opts.kill_after.is_some_and(|k| elapsed >= k) && !killed && agents.len() > 1 {
             killed = true;
-            let (robot, tx, task) = agents.pop().expect("an agent");
-            let _ = tx.send(true);
-            let _ = task.await;
-            changes.push(MembersChange { at_s: elapsed.as_secs_f64(), event: "left".into(), robot: robot.to_string() });
+            let agent = agents.pop().expect("an agent");
+            let robot = agent.robot.to_string();
+            if let Err(e) = agent.stop().await {
+                tracing::warn!("{robot} left uncleanly: {e:#}");
+            }
+            changes.push(MembersChange { at_s: elapsed.as_secs_f64(), event: "left".into(), robot });
         }
         if opts.join_after.is_some_and(|j| elapsed >= j) && !joined {
             joined = true;
-            let a = start_agent(next_id)?;
+            let a = InProcessAgent::start(&hub, &robot_id(next_id)?, &models, opts.agent.clone()).await?;
             next_id += 1;
-            changes.push(MembersChange { at_s: elapsed.as_secs_f64(), event: "joined".into(), robot: a.0.to_string() });
+            changes.push(MembersChange {
+                at_s: elapsed.as_secs_f64(),
+                event: "joined".into(),
+                robot: a.robot.to_string(),
+            });
             agents.push(a);
         }
         // One summary per beat, shared by the page and the terminal view.
@@ -444,7 +431,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
                 }
             }
             if opts.view && second {
-                let members: Vec<RobotId> = agents.iter().map(|a| a.0.clone()).collect();
+                let members: Vec<RobotId> = agents.iter().map(|a| a.robot.clone()).collect();
                 view(&o, elapsed, &members, &summary);
             }
         }
@@ -453,11 +440,14 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
 
     let _ = world_stop.send(true);
     let _ = world.await;
-    for (_, tx, task) in agents {
-        let _ = tx.send(true);
-        let _ = task.await;
+    for agent in agents {
+        let robot = agent.robot.to_string();
+        if let Err(e) = agent.stop().await {
+            tracing::warn!("{robot} left uncleanly: {e:#}");
+        }
     }
-    let _ = observer.close().await;
+    drop(_all);
+    let _ = hub.session.close().await;
     let o = observed.lock().expect("observer lock");
     Ok(summarise(&o, opts.robots, &changes, models.manifest.fixture))
 }
@@ -602,13 +592,5 @@ mod tests {
         let line = vote_line(&quiet, shown_vote(&o, &quiet, now).as_ref());
         assert!(line.contains("no vote this tick (last: workstation, 0.7 s ago)"), "{line}");
         assert!(vote_line(&gone, None).ends_with("no vote"));
-    }
-
-    #[test]
-    fn percentiles() {
-        let v: Vec<f64> = (1..=100).map(f64::from).collect();
-        assert_eq!(percentile(&v, 0.5), 51.0);
-        assert_eq!(percentile(&v, 0.99), 99.0);
-        assert_eq!(percentile(&[], 0.5), 0.0);
     }
 }

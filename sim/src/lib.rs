@@ -13,7 +13,8 @@
 //! faulty_camera.rs cameras that lie: frozen on one frame, or looping an old clip
 //! bench.rs      `spwi-sim bench`: N agent processes over Zenoh; latency, CPU, memory
 //! soak.rs       `spwi-sim bench --soak`: the same fleet for long, robots leaving and freezing
-//! loopback.rs   the fleet of agent processes around the world's hub session, for both
+//! loopback/     a fleet on one machine (hub, agents in-process or as processes, their
+//!               decisions): shared by the demo, the bench and the end-to-end tests
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
 //! world_args.rs the world every tool runs in (scenario, floors, cameras)

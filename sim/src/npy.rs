@@ -4,6 +4,13 @@
 //! never held in memory; the row count is patched into the header when the file is
 //! finished (the header reserves room for it). `numpy.load` (and so PyTorch) reads the
 //! result directly, memory-mapped if wished.
+//!
+//! Written here rather than taken from a crate because no kept one streams an n-d
+//! array whose length is known only at the end: `npyz` patches the count for 1-d
+//! arrays only (`begin_1d`), `ndarray-npy` needs the whole shape up front, and a 1-d
+//! array of sub-array rows (`('<f4', (d,))`) is read by `numpy.load` only when
+//! memory-mapped (checked with numpy 2.4). The header is the format's 1.0 dict; CI
+//! reads every exported array back in NumPy.
 
 use anyhow::{Context, Result};
 use std::fs::File;

@@ -172,10 +172,9 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     let at_end = resources(&fleet);
     let (measured_since, first_tick) = measure_from.expect("measured after the warm-up");
     let seconds = measured_since.elapsed().as_secs_f64();
-    let (seen, ids) = (fleet.seen.clone(), fleet.ids.clone());
+    let (decisions, ids) = (std::mem::take(&mut *fleet.decisions.lock()), fleet.ids.clone());
     drop(fleet);
 
-    let st = seen.lock().expect("fleet observer");
     let settle_ticks = (SETTLE.as_secs_f64() / TICK_PERIOD.as_secs_f64()).round() as u64;
     let last_tick = world.tick;
     let mut report = SoakReport {
@@ -229,7 +228,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
             .chain(churning_live.then_some(churning))
             .map(|slot| &ids[slot])
             .collect();
-        let decided = st.decisions.get(&t);
+        let decided = decisions.get(&t);
         let got: Vec<_> = expected.iter().filter_map(|r| decided.and_then(|d| d.get(*r))).collect();
         if got.len() < expected.len() {
             report.undecided_ticks += 1;
@@ -239,10 +238,10 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
             continue;
         }
         let live = expected.len() as u32;
-        report.false_removals += u64::from(got.iter().any(|d| d.live_members < live));
-        report.ghost_members += u64::from(got.iter().any(|d| d.live_members > live));
+        report.false_removals += u64::from(got.iter().any(|d| d.msg.live_members < live));
+        report.ghost_members += u64::from(got.iter().any(|d| d.msg.live_members > live));
         complete += 1;
-        agreed += u64::from(got.iter().all(|d| d.class == got[0].class));
+        agreed += u64::from(got.iter().all(|d| d.class() == got[0].class()));
         let last = got.iter().map(|d| d.at).max().expect("at least one robot expected");
         latencies.push((last - published[&t]).as_secs_f64() * 1e3);
     }

@@ -15,10 +15,10 @@ const EXE: &str = env!("CARGO_BIN_EXE_spwi-test-agent");
 const TICK: Duration = Duration::from_millis(100);
 
 /// Three agent processes deciding; returns them once all count 3 members.
-async fn three_processes(hub: &Hub, collector: &Collector) -> Vec<ProcessAgent> {
+async fn three_processes(hub: &Hub, collector: &Decisions) -> Vec<AgentProcess> {
     let ids: Vec<_> = (0..3).map(|i| id(&format!("p{i}"))).collect();
-    let agents: Vec<_> = ids.iter().map(|r| ProcessAgent::start(EXE, hub, r)).collect();
-    collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(15)).await;
+    let agents: Vec<_> = ids.iter().map(|r| agent_process(EXE, hub, r)).collect();
+    collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(15)).await.unwrap();
     agents
 }
 
@@ -27,14 +27,14 @@ async fn a_killed_agent_is_out_within_1_5_s_and_decisions_go_on() {
     let _serial = serial().await;
     within!(60, "test", async {
         let hub = Hub::start("kill").await.unwrap();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids: Vec<_> = (0..3).map(|i| id(&format!("p{i}"))).collect();
         let publisher = Publisher::start(&hub, ids.clone(), TICK);
         let mut agents = three_processes(&hub, &collector).await;
         let victim = agents.pop().unwrap();
         let (t0, tick0) = (Instant::now(), publisher.current_tick());
-        victim.signal("KILL");
-        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await;
+        victim.signal("KILL").unwrap();
+        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await.unwrap();
         eprintln!("SIGKILL seen in {took:?}");
         tokio::time::sleep(Duration::from_secs(1)).await;
         let tick1 = publisher.current_tick();
@@ -49,13 +49,13 @@ async fn a_frozen_agent_is_out_within_1_5_s_and_back_after_sigcont() {
     let _serial = serial().await;
     within!(60, "test", async {
         let hub = Hub::start("freeze").await.unwrap();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids: Vec<_> = (0..3).map(|i| id(&format!("p{i}"))).collect();
         let publisher = Publisher::start(&hub, ids.clone(), TICK);
         let agents = three_processes(&hub, &collector).await;
         let (t0, tick0) = (Instant::now(), publisher.current_tick());
-        agents[2].signal("STOP");
-        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await;
+        agents[2].signal("STOP").unwrap();
+        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await.unwrap();
         eprintln!("SIGSTOP seen in {took:?}");
         tokio::time::sleep(Duration::from_millis(500)).await;
         let tick1 = publisher.current_tick();
@@ -63,8 +63,8 @@ async fn a_frozen_agent_is_out_within_1_5_s_and_back_after_sigcont() {
             assert!(collector.longest_gap(r, tick0 + 1, tick1 - 1) <= 1, "{r} stopped deciding while p2 was frozen");
         }
         let t1 = Instant::now();
-        agents[2].signal("CONT");
-        let took = collector.wait_members(&ids, 3, t1, Duration::from_secs(10)).await;
+        agents[2].signal("CONT").unwrap();
+        let took = collector.wait_members(&ids, 3, t1, Duration::from_secs(10)).await.unwrap();
         eprintln!("SIGCONT: back in {took:?}");
     });
 }
@@ -75,12 +75,12 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
     within!(60, "test", async {
         let hub = Hub::start("bad").await.unwrap();
         let models = models();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids = vec![id("a"), id("b")];
-        let a = InProcessAgent::start(&hub, &ids[0], &models, AgentConfig::default()).await;
-        let b = InProcessAgent::start(&hub, &ids[1], &models, AgentConfig::default()).await;
+        let a = InProcessAgent::start(&hub, &ids[0], &models, AgentConfig::default()).await.unwrap();
+        let b = InProcessAgent::start(&hub, &ids[1], &models, AgentConfig::default()).await.unwrap();
         let publisher = Publisher::start(&hub, ids.clone(), TICK);
-        collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(5)).await;
+        collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(5)).await.unwrap();
 
         // One of each kind of bad input, on every key the agents read.
         let good_vote = VoteMsg {
@@ -149,8 +149,8 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
         for r in &ids {
             assert!(collector.longest_gap(r, tick0 + 1, tick1 - 1) <= 1, "{r} stopped deciding under bad input");
         }
-        a.stop().await;
-        b.stop().await;
+        a.stop().await.unwrap();
+        b.stop().await.unwrap();
     });
 }
 
@@ -160,11 +160,11 @@ async fn a_second_daemon_with_a_taken_robot_id_is_refused() {
     within!(60, "test", async {
         let hub = Hub::start("dup").await.unwrap();
         let models = models();
-        let a = InProcessAgent::start(&hub, &id("same"), &models, AgentConfig::default()).await;
+        let a = InProcessAgent::start(&hub, &id("same"), &models, AgentConfig::default()).await.unwrap();
         tokio::time::sleep(Duration::from_millis(500)).await;
-        let mut second = ProcessAgent::start(EXE, &hub, &id("same"));
-        let status = second.wait_exit(Duration::from_secs(20)).await;
+        let mut second = agent_process(EXE, &hub, &id("same"));
+        let status = second.wait_exit(Duration::from_secs(20)).await.unwrap();
         assert!(!status.success(), "a daemon with a taken robot id must refuse to start");
-        a.stop().await;
+        a.stop().await.unwrap();
     });
 }

@@ -21,11 +21,11 @@ fn robots(n: usize) -> Vec<spwi_proto::RobotId> {
 async fn decide_together(n: usize, ticks: u64) {
     let hub = Hub::start(&format!("together{n}")).await.unwrap();
     let models = models();
-    let collector = Collector::start(&hub).await.unwrap();
+    let collector = hub.decisions().await.unwrap();
     let ids = robots(n);
     let mut agents = Vec::new();
     for r in &ids {
-        agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+        agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
     }
     tokio::time::sleep(Duration::from_millis(700)).await; // mesh and membership settle
     let publisher = Publisher::start(&hub, ids.clone(), TICK);
@@ -54,7 +54,7 @@ async fn decide_together(n: usize, ticks: u64) {
     let total = checked.count() as u64;
     assert!(same * 100 >= total * 99, "{n} agents agreed on only {same} of {total} ticks");
     for a in agents {
-        a.stop().await;
+        a.stop().await.unwrap();
     }
 }
 
@@ -82,21 +82,21 @@ async fn a_graceful_leave_and_a_join_change_the_members_and_decisions_go_on() {
     within!(90, "test", async {
         let hub = Hub::start("churn").await.unwrap();
         let models = models();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids = robots(4);
         let mut agents = Vec::new();
         for r in &ids[..3] {
-            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
         }
         let _publisher = Publisher::start(&hub, ids.clone(), TICK);
-        collector.wait_members(&ids[..3], 3, Instant::now(), Duration::from_secs(5)).await;
+        collector.wait_members(&ids[..3], 3, Instant::now(), Duration::from_secs(5)).await.unwrap();
 
         // r2 leaves gracefully.
         let leaver = agents.pop().unwrap();
         let t0 = Instant::now();
         let tick0 = _publisher.current_tick();
-        leaver.stop().await;
-        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await;
+        leaver.stop().await.unwrap();
+        let took = collector.wait_members(&ids[..2], 2, t0, Duration::from_millis(1500)).await.unwrap();
         eprintln!("graceful leave seen in {took:?}");
         tokio::time::sleep(Duration::from_millis(500)).await;
         let tick1 = _publisher.current_tick();
@@ -106,25 +106,25 @@ async fn a_graceful_leave_and_a_join_change_the_members_and_decisions_go_on() {
 
         // r3 joins and is counted within a second, and decides.
         let t1 = Instant::now();
-        agents.push(InProcessAgent::start(&hub, &ids[3], &models, AgentConfig::default()).await);
+        agents.push(InProcessAgent::start(&hub, &ids[3], &models, AgentConfig::default()).await.unwrap());
         let ours = [ids[0].clone(), ids[1].clone(), ids[3].clone()];
-        let took = collector.wait_members(&ours, 3, t1, Duration::from_secs(1)).await;
+        let took = collector.wait_members(&ours, 3, t1, Duration::from_secs(1)).await.unwrap();
         eprintln!("join seen in {took:?}");
         // and its vote counts: soon every decision lists three voters
         within!(5, "the newcomer's vote to be counted", async {
             loop {
-                let seen = collector.seen.lock().unwrap().clone();
+                let mut seen = collector.all();
+                seen.sort_by_key(|s| s.at);
                 if seen.iter().rev().take(6).all(|s| s.msg.voters.len() == 3 || s.msg.steps.is_empty())
                     && seen.len() > 6
                 {
                     break;
                 }
-                drop(seen);
                 tokio::time::sleep(Duration::from_millis(50)).await;
             }
         });
         for a in agents {
-            a.stop().await;
+            a.stop().await.unwrap();
         }
     });
 }
@@ -135,24 +135,26 @@ async fn a_recorded_run_replays_to_the_same_decisions_bit_for_bit() {
     within!(60, "test", async {
         let hub = Hub::start("record").await.unwrap();
         let models = models();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids = robots(3);
         let file = std::env::temp_dir().join(format!("spwi-record-{}.mcap", std::process::id()));
         let recorded =
-            InProcessAgent::start_recording(&hub, &ids[0], &models, AgentConfig::default(), Some(file.clone())).await;
+            InProcessAgent::start_recording(&hub, &ids[0], &models, AgentConfig::default(), Some(file.clone()))
+                .await
+                .unwrap();
         let mut others = Vec::new();
         for r in &ids[1..] {
-            others.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+            others.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
         }
         let publisher = Publisher::start(&hub, ids.clone(), TICK);
-        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(5)).await;
+        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(5)).await.unwrap();
         // churn while recording: one peer leaves
-        others.pop().unwrap().stop().await;
+        others.pop().unwrap().stop().await.unwrap();
         tokio::time::sleep(Duration::from_secs(2)).await;
         drop(publisher);
-        recorded.stop().await;
+        recorded.stop().await.unwrap();
         for a in others {
-            a.stop().await;
+            a.stop().await.unwrap();
         }
 
         let recording = spwi_agent::record::read(&file).unwrap();

@@ -32,17 +32,15 @@ async fn robots_keep_deciding_and_agreeing_when_their_links_drop_packets() {
         let rto_min = std::env::var("SPWI_TEST_RTO_MIN").ok();
         let net = LossyNetwork::create(ROBOTS, rto_min.as_deref()).unwrap();
         let hub = Hub::start_listening("lossy", &format!("tcp/{}:0", netns::HOST_ADDRESS)).await.unwrap();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids: Vec<_> = (0..ROBOTS).map(|i| id(&format!("n{i}"))).collect();
         let publisher = Publisher::start(&hub, ids.clone(), TICK);
         let _agents: Vec<_> = ids
             .iter()
             .enumerate()
-            .map(|(i, r)| {
-                ProcessAgent::start_with(net.command(i, EXE), &hub, r, &format!("tcp/{}:7447", net.address(i)))
-            })
+            .map(|(i, r)| agent_process_with(net.command(i, EXE), &hub, r, &format!("tcp/{}:7447", net.address(i))))
             .collect();
-        collector.wait_members(&ids, ROBOTS as u32, Instant::now(), Duration::from_secs(20)).await;
+        collector.wait_members(&ids, ROBOTS as u32, Instant::now(), Duration::from_secs(20)).await.unwrap();
         for (loss, least_agreement, least_decided) in PHASES {
             net.drop_between_robots(loss).unwrap();
             tokio::time::sleep(Duration::from_secs(2)).await;

@@ -24,19 +24,67 @@ fn request(addr: std::net::SocketAddr, method: &str, path: &str) -> (u16, String
     (code, text.split("\r\n\r\n").nth(1).unwrap_or("").to_owned())
 }
 
+/// A GET whose headers run to 1 MB. Returns the status code the server answered, or
+/// `None` when it closed the connection without one.
+fn huge_request(addr: std::net::SocketAddr) -> Option<u16> {
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let header = format!("X-Filler: {}\r\n", "a".repeat(1 << 20));
+    // The server may stop reading (and reset the connection) before all is sent.
+    let _ = write!(s, "GET /status HTTP/1.1\r\nHost: x\r\n{header}Connection: close\r\n\r\n");
+    let mut text = String::new();
+    let _ = s.read_to_string(&mut text);
+    text.split_whitespace().nth(1).and_then(|c| c.parse().ok())
+}
+
+/// The families of `text` as the Prometheus project's own OpenMetrics parser reads
+/// them (Python's `prometheus_client`, strict where a scraper is): one "name type
+/// samples" line each. `None` when no Python with `prometheus_client` is at hand
+/// (`SPWI_PYTHON`, else `python3`); `.ci/run` installs one and sets
+/// SPWI_REQUIRE_OPENMETRICS_PARSER=1, so there a missing parser fails the test.
+fn parsed_as_openmetrics(text: &str) -> Option<String> {
+    const PARSE: &str =
+        "import sys\nfrom prometheus_client.openmetrics.parser import text_string_to_metric_families as p\n\
+                         for f in p(sys.stdin.read()): print(f.name, f.type, len(f.samples))";
+    let python = std::env::var("SPWI_PYTHON").unwrap_or_else(|_| "python3".into());
+    let has_parser = std::process::Command::new(&python)
+        .args(["-c", "import prometheus_client.openmetrics.parser"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !has_parser {
+        assert!(
+            std::env::var_os("SPWI_REQUIRE_OPENMETRICS_PARSER").is_none(),
+            "SPWI_REQUIRE_OPENMETRICS_PARSER is set but {python} cannot import prometheus_client"
+        );
+        eprintln!("\n!!!!!!!! SKIPPED parsing /metrics as OpenMetrics: no prometheus_client for {python} !!!!!!!!\n");
+        return None;
+    }
+    let mut child = std::process::Command::new(&python)
+        .args(["-c", PARSE])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(text.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "/metrics is not OpenMetrics: {}\n{text}", String::from_utf8_lossy(&out.stderr));
+    Some(String::from_utf8(out.stdout).unwrap())
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn status_metrics_and_health_are_served_while_deciding() {
     within!(60, "test", async {
         let hub = Hub::start("http").await.unwrap();
         let models = models();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids = vec![id("h0"), id("h1")];
         let mut config = AgentConfig::default();
         config.http.listen = Some("127.0.0.1:0".parse().unwrap());
-        let a = InProcessAgent::start(&hub, &ids[0], &models, config).await;
-        let b = InProcessAgent::start(&hub, &ids[1], &models, AgentConfig::default()).await;
+        let a = InProcessAgent::start(&hub, &ids[0], &models, config).await.unwrap();
+        let b = InProcessAgent::start(&hub, &ids[1], &models, AgentConfig::default()).await.unwrap();
         let _publisher = Publisher::start(&hub, ids.clone(), Duration::from_millis(100));
-        collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(5)).await;
+        collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(5)).await.unwrap();
         tokio::time::sleep(Duration::from_millis(500)).await;
         let addr = a.started.http.expect("http address");
 
@@ -71,14 +119,27 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         ] {
             assert!(body.contains(needle), "/metrics lacks {needle}:\n{body}");
         }
+        let text = body.clone();
+        if let Some(families) = tokio::task::spawn_blocking(move || parsed_as_openmetrics(&text)).await.unwrap() {
+            for family in ["spwi_decisions counter", "spwi_members gauge", "spwi_stage_seconds histogram"] {
+                assert!(
+                    families.lines().any(|l| l.starts_with(family)),
+                    "no {family} in the parsed families:\n{families}"
+                );
+            }
+        }
         let (code, _) = tokio::task::spawn_blocking(move || get(addr, "/nope")).await.unwrap();
         assert_eq!(code, 404);
         let (code, body) = tokio::task::spawn_blocking(move || request(addr, "HEAD", "/healthz")).await.unwrap();
         assert_eq!((code, body.as_str()), (200, ""), "HEAD answers like GET, without the body");
         let (code, _) = tokio::task::spawn_blocking(move || request(addr, "POST", "/status")).await.unwrap();
         assert_eq!(code, 405, "the endpoints only read");
-        a.stop().await;
-        b.stop().await;
+        let answer = tokio::task::spawn_blocking(move || huge_request(addr)).await.unwrap();
+        assert!(matches!(answer, None | Some(431)), "a request with 1 MB of headers got {answer:?}");
+        let (code, _) = tokio::task::spawn_blocking(move || get(addr, "/healthz")).await.unwrap();
+        assert_eq!(code, 200, "still serving after refusing the 1 MB request");
+        a.stop().await.unwrap();
+        b.stop().await.unwrap();
     });
 }
 
@@ -87,18 +148,18 @@ async fn sigterm_leaves_the_fleet_cleanly() {
     within!(60, "test", async {
         let hub = Hub::start("term").await.unwrap();
         let models = models();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids = vec![id("t0"), id("t1")];
-        let stays = InProcessAgent::start(&hub, &ids[0], &models, AgentConfig::default()).await;
-        let mut leaves = ProcessAgent::start(EXE, &hub, &ids[1]);
+        let stays = InProcessAgent::start(&hub, &ids[0], &models, AgentConfig::default()).await.unwrap();
+        let mut leaves = agent_process(EXE, &hub, &ids[1]);
         let _publisher = Publisher::start(&hub, ids.clone(), Duration::from_millis(100));
-        collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(15)).await;
+        collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(15)).await.unwrap();
         let t0 = Instant::now();
-        leaves.signal("TERM");
-        let took = collector.wait_members(&ids[..1], 1, t0, Duration::from_millis(1500)).await;
+        leaves.signal("TERM").unwrap();
+        let took = collector.wait_members(&ids[..1], 1, t0, Duration::from_millis(1500)).await.unwrap();
         eprintln!("SIGTERM: out of the vote in {took:?}");
-        let status = leaves.wait_exit(Duration::from_secs(10)).await;
+        let status = leaves.wait_exit(Duration::from_secs(10)).await.unwrap();
         assert!(status.success(), "SIGTERM must end the daemon cleanly: {status}");
-        stays.stop().await;
+        stays.stop().await.unwrap();
     });
 }

@@ -66,7 +66,7 @@ impl Drop for Dirs {
 struct Observed {
     hub: Hub,
     keys_seen: Arc<Mutex<Vec<String>>>,
-    collector: Collector,
+    collector: Decisions,
     _watch: zenoh::pubsub::Subscriber<()>,
 }
 
@@ -80,7 +80,7 @@ async fn observe(dirs: &Dirs) -> Observed {
         .callback(move |sample| s.lock().unwrap().push(sample.key_expr().as_str().to_owned()))
         .await
         .unwrap();
-    let collector = Collector::start(&hub).await.unwrap();
+    let collector = hub.decisions().await.unwrap();
     Observed { hub, keys_seen, collector, _watch }
 }
 
@@ -172,8 +172,8 @@ async fn run_ticks(hub: &Hub, robots: Vec<RobotId>, ticks: u64) {
 
 /// Every decision of `robots` since `since` counted exactly `members` and only them;
 /// and each of them decided at least `at_least` times.
-fn only_members_counted(collector: &Collector, robots: &[RobotId], since: Instant, at_least: usize) {
-    let seen = collector.seen.lock().unwrap();
+fn only_members_counted(collector: &Decisions, robots: &[RobotId], since: Instant, at_least: usize) {
+    let seen = collector.all();
     for r in robots {
         let mine: Vec<_> = seen.iter().filter(|s| s.at >= since && &s.msg.robot == r).collect();
         assert!(mine.len() >= at_least, "{r} decided only {} times", mine.len());
@@ -197,7 +197,7 @@ async fn outsiders_get_no_link_and_are_never_counted() {
         let members = vec![id("r1"), id("r2")];
         let mut agents = Vec::new();
         for r in &members {
-            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
         }
         // A control: a member's own raw session does get a link.
         let (member, _) = secured_peer(&dirs.fleet.root, "r3", std::slice::from_ref(&hub.locator)).unwrap();
@@ -248,7 +248,7 @@ async fn outsiders_get_no_link_and_are_never_counted() {
         only_members_counted(&collector, &members, since, 20);
         assert!(Credentials::load(&dirs.fleet, "r4").unwrap_err().to_string().contains("expired on"));
         for a in agents {
-            a.stop().await;
+            a.stop().await.unwrap();
         }
     });
 }
@@ -260,11 +260,11 @@ async fn a_member_cannot_speak_for_another_robot() {
         let dirs = Dirs::make("impostor");
         let Observed { hub, keys_seen, collector, _watch } = observe(&dirs).await;
         let models = models();
-        let r1 = InProcessAgent::start(&hub, &id("r1"), &models, AgentConfig::default()).await;
+        let r1 = InProcessAgent::start(&hub, &id("r1"), &models, AgentConfig::default()).await.unwrap();
         // A whole daemon calling itself r2 with r3's certificate, and r3's raw session
         // speaking for r2 (and, as a control, for itself).
         let (zenoh, credentials) = hub.member_config("r3").unwrap();
-        let impostor = InProcessAgent::start_with(agent_as(&hub, "r2", zenoh, credentials), &models).await;
+        let impostor = InProcessAgent::start_with(agent_as(&hub, "r2", zenoh, credentials), &models).await.unwrap();
         let (raw, _) = secured_peer(&dirs.fleet.root, "r3", std::slice::from_ref(&hub.locator)).unwrap();
         let r3 = open(raw, "r3").await;
 
@@ -288,7 +288,7 @@ async fn a_member_cannot_speak_for_another_robot() {
         }
         // r1 counts itself and r3 (whose own token is its right), never r2.
         let mut counted_r3 = false;
-        let seen = collector.seen.lock().unwrap().clone();
+        let seen = collector.all();
         assert!(seen.iter().all(|s| s.msg.robot != id("r2")), "a decision as r2 reached the hub");
         for s in seen.iter().filter(|s| s.at >= since && s.msg.robot == id("r1")) {
             assert!(!s.msg.voters.contains(&id("r2")), "r1 counted a vote of r2 at tick {}", s.msg.tick);
@@ -296,8 +296,8 @@ async fn a_member_cannot_speak_for_another_robot() {
             assert!(s.msg.live_members <= 2, "r1 counted {} members at tick {}", s.msg.live_members, s.msg.tick);
         }
         assert!(counted_r3, "r1 never counted r3's own token: the test proves nothing");
-        impostor.stop().await;
-        r1.stop().await;
+        impostor.stop().await.unwrap();
+        r1.stop().await.unwrap();
     });
 }
 
@@ -315,9 +315,9 @@ async fn a_revoked_robot_cannot_rejoin_with_its_old_files() {
 
         let Observed { hub, keys_seen, collector, _watch } = observe(&dirs).await;
         let models = models();
-        let r1 = InProcessAgent::start(&hub, &id("r1"), &models, AgentConfig::default()).await;
+        let r1 = InProcessAgent::start(&hub, &id("r1"), &models, AgentConfig::default()).await.unwrap();
         let (zenoh, creds) = secured_peer(&stale, "r2", std::slice::from_ref(&hub.locator)).unwrap();
-        let r2 = InProcessAgent::start_with(agent_as(&hub, "r2", zenoh, Some(creds)), &models).await;
+        let r2 = InProcessAgent::start_with(agent_as(&hub, "r2", zenoh, Some(creds)), &models).await.unwrap();
         let since = Instant::now();
         run_ticks(&hub, vec![id("r1"), id("r2")], 30).await;
 
@@ -326,8 +326,8 @@ async fn a_revoked_robot_cannot_rejoin_with_its_old_files() {
         let leaked =
             keys_seen.lock().unwrap().iter().filter(|k| k.contains("/r2/") && !k.ends_with("/detections")).count();
         assert_eq!(leaked, 0, "the revoked r2 reached the hub");
-        r2.stop().await;
-        r1.stop().await;
+        r2.stop().await.unwrap();
+        r1.stop().await.unwrap();
     });
 }
 

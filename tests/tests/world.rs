@@ -18,7 +18,7 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
     within!(60, "test", async {
         let hub = Hub::start("simworld").await.unwrap();
         let models = models();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let truths = Arc::new(Mutex::new(Vec::<TruthMsg>::new()));
         let t = truths.clone();
         let _truth_sub = hub
@@ -35,7 +35,7 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
         let ids: Vec<_> = (0..3).map(|i| id(&format!("w{i}"))).collect();
         let mut agents = Vec::new();
         for r in &ids {
-            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
         }
         let (stop_world, rx) = tokio::sync::watch::channel(false);
         let opts = WorldOptions {
@@ -43,13 +43,13 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
             scenario: Scenario::Dynamic,
             seed: 11,
             layout: Layout::default_layout(),
-            zenoh: hub.peer_config(),
+            zenoh: hub.peer_config().unwrap(),
             tick: Duration::from_millis(100),
             stuck_slot: None,
         };
         let world = tokio::spawn(service::run(opts, rx));
 
-        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(10)).await;
+        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(10)).await.unwrap();
         tokio::time::sleep(Duration::from_secs(3)).await;
 
         // the truth lists exactly the live robots, and every robot decides ticks in a row
@@ -66,7 +66,7 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
         }
 
         // a robot that leaves frees its slot: the world stops listing it
-        agents.pop().unwrap().stop().await;
+        agents.pop().unwrap().stop().await.unwrap();
         tokio::time::sleep(Duration::from_millis(500)).await;
         let last = truths.lock().unwrap().last().cloned().unwrap();
         assert_eq!(last.robots.len(), 2, "{:?}", last.robots);
@@ -74,7 +74,7 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
         stop_world.send(true).unwrap();
         within!(10, "world to stop", world).unwrap().unwrap();
         for a in agents {
-            a.stop().await;
+            a.stop().await.unwrap();
         }
     });
 }
@@ -84,11 +84,11 @@ async fn a_robot_whose_camera_freezes_leaves_the_vote_and_the_others_carry_on() 
     within!(90, "test", async {
         let hub = Hub::start("stuckworld").await.unwrap();
         let models = models();
-        let collector = Collector::start(&hub).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
         let ids: Vec<_> = (0..3).map(|i| id(&format!("s{i}"))).collect();
         let mut agents = Vec::new();
         for r in &ids {
-            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await);
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
         }
         let (stop_world, rx) = tokio::sync::watch::channel(false);
         let opts = WorldOptions {
@@ -96,12 +96,12 @@ async fn a_robot_whose_camera_freezes_leaves_the_vote_and_the_others_carry_on() 
             scenario: Scenario::Dynamic,
             seed: 11,
             layout: Layout::default_layout(),
-            zenoh: hub.peer_config(),
+            zenoh: hub.peer_config().unwrap(),
             tick: Duration::from_millis(100),
             stuck_slot: Some(0),
         };
         let world = tokio::spawn(service::run(opts, rx));
-        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(10)).await;
+        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(10)).await.unwrap();
 
         // Whichever robot holds slot 0 sees its feed freeze once it has seen the worker.
         let stale = loop {
@@ -133,7 +133,7 @@ async fn a_robot_whose_camera_freezes_leaves_the_vote_and_the_others_carry_on() 
         stop_world.send(true).unwrap();
         within!(10, "world to stop", world).unwrap().unwrap();
         for a in agents {
-            a.stop().await;
+            a.stop().await.unwrap();
         }
     });
 }

@@ -4,17 +4,16 @@
 //! byte counts) and who holds a liveliness token. Agents can be stopped, started again
 //! and frozen; their CPU, memory and open files are read from /proc.
 
+use super::{AgentProcess, Decisions, Hub, Launch};
 use anyhow::{anyhow, bail, Context, Result};
 use spwi_agent::fleet::authority::ThrowawayFleet;
-use spwi_agent::fleet::{secure_or_warn, Role};
-use spwi_agent::zenoh_config;
+use spwi_agent::fleet::Role;
 use spwi_proto::keys::{self, Topic};
-use spwi_proto::*;
+use spwi_proto::{encode, FleetId, RobotId};
 use spwi_world::layout::Layout;
 use spwi_world::world::World;
-use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -32,21 +31,9 @@ pub struct FleetOptions {
     pub agent_cfg: Vec<String>,
 }
 
-/// One robot's decision as the hub received it.
-#[derive(Debug, Clone, Copy)]
-pub struct Decided {
-    /// The team's class at t; `None` when no member saw the worker.
-    pub class: Option<Station>,
-    pub at: Instant,
-    /// Live members the robot counted, itself included.
-    pub live_members: u32,
-}
-
-/// What the hub has seen of the agents.
+/// What the hub counts of the agents' traffic besides their decisions.
 #[derive(Default)]
-pub struct Seen {
-    /// tick → robot → its decision
-    pub decisions: BTreeMap<u64, BTreeMap<RobotId, Decided>>,
+pub struct Traffic {
     /// Messages and bytes the agents published (detections excluded).
     pub messages: u64,
     pub bytes: u64,
@@ -55,15 +42,15 @@ pub struct Seen {
 }
 
 pub struct LoopbackFleet {
-    pub fleet: FleetId,
     pub ids: Vec<RobotId>,
-    pub session: zenoh::Session,
-    pub seen: Arc<Mutex<Seen>>,
-    hub: String,
+    pub hub: Hub,
+    pub decisions: Decisions,
+    pub traffic: Arc<Mutex<Traffic>>,
     options: FleetOptions,
-    secured: Option<ThrowawayFleet>,
+    /// Keeps the throw-away fleet directory of a secured fleet.
+    _secured: Option<ThrowawayFleet>,
     /// One slot per robot; `None` while its agent is stopped.
-    agents: Vec<Option<Child>>,
+    agents: Vec<Option<AgentProcess>>,
     detection_keys: Vec<String>,
     _traffic: zenoh::pubsub::Subscriber<()>,
     _members: zenoh::pubsub::Subscriber<()>,
@@ -78,86 +65,64 @@ impl LoopbackFleet {
                 options.agent.display()
             );
         }
-        let fleet = FleetId::new(format!("bench{}", std::process::id()))?;
+        let fleet = format!("bench{}", std::process::id());
         let ids: Vec<RobotId> = (0..options.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
-        let secured = if options.secured {
+        let (hub, secured) = if options.secured {
             let members: Vec<(&str, Role)> =
                 std::iter::once(("world", Role::World)).chain(ids.iter().map(|r| (r.as_str(), Role::Robot))).collect();
-            Some(ThrowawayFleet::create("bench", &fleet, &members)?)
+            let secured = ThrowawayFleet::create("bench", &FleetId::new(&fleet)?, &members)?;
+            (Hub::start_secured(&secured.dir.root, "world").await?, Some(secured))
         } else {
-            None
+            (Hub::start(&fleet).await?, None)
         };
-        let mut hub_config = zenoh_config::loopback_peer(&[])?;
-        if let Some(s) = &secured {
-            secure_or_warn(&mut hub_config, Some(&s.dir.root), "world", Role::World, "spwi-sim bench")?;
-        }
-        let session = zenoh::open(hub_config).await.map_err(|e| anyhow!("zenoh: {e}"))?;
-        let hub = session
-            .info()
-            .locators()
-            .await
-            .into_iter()
-            .next()
-            .ok_or_else(|| anyhow!("the world's session listens nowhere"))?
-            .to_string();
-        let seen = Arc::new(Mutex::new(Seen::default()));
-        let traffic = {
-            let (seen, fleet) = (seen.clone(), fleet.clone());
-            session
+        let decisions = Decisions::subscribe(&hub.session, &hub.fleet).await?;
+        let traffic = Arc::new(Mutex::new(Traffic::default()));
+        let counted = {
+            let (traffic, fleet) = (traffic.clone(), hub.fleet.clone());
+            hub.session
                 .declare_subscriber(keys::all_robot_topics(&fleet))
                 .callback(move |s| {
-                    let Some((robot, topic)) = keys::parse_robot_topic(&fleet, s.key_expr().as_str()) else {
-                        return;
-                    };
-                    if topic == Topic::Detections {
-                        return;
-                    }
-                    let bytes = s.payload().to_bytes();
-                    let mut st = seen.lock().expect("fleet observer");
-                    st.messages += 1;
-                    st.bytes += bytes.len() as u64;
-                    if topic == Topic::Decision {
-                        if let Ok(d) = decode_from::<DecisionMsg>(&bytes, &robot) {
-                            let class = d.steps.first().map(|s| s.class);
-                            let decided = Decided { class, at: Instant::now(), live_members: d.live_members };
-                            st.decisions.entry(d.tick).or_default().insert(robot, decided);
-                        }
+                    if keys::parse_robot_topic(&fleet, s.key_expr().as_str())
+                        .is_some_and(|(_, t)| t != Topic::Detections)
+                    {
+                        let mut t = traffic.lock().expect("traffic");
+                        t.messages += 1;
+                        t.bytes += s.payload().len() as u64;
                     }
                 })
                 .await
                 .map_err(|e| anyhow!(e))?
         };
         let members = {
-            let (seen, fleet) = (seen.clone(), fleet.clone());
-            session
+            let (traffic, fleet) = (traffic.clone(), hub.fleet.clone());
+            hub.session
                 .liveliness()
                 .declare_subscriber(keys::all_alive(&fleet))
                 .history(true)
                 .callback(move |s| {
                     if keys::parse_alive(&fleet, s.key_expr().as_str()).is_some() {
-                        let mut st = seen.lock().expect("fleet observer");
+                        let mut t = traffic.lock().expect("traffic");
                         if s.kind() == zenoh::sample::SampleKind::Put {
-                            st.members += 1;
+                            t.members += 1;
                         } else {
-                            st.members = st.members.saturating_sub(1);
+                            t.members = t.members.saturating_sub(1);
                         }
                     }
                 })
                 .await
                 .map_err(|e| anyhow!(e))?
         };
-        let detection_keys = ids.iter().map(|id| keys::robot_topic(&fleet, id, Topic::Detections)).collect();
+        let detection_keys = ids.iter().map(|id| keys::robot_topic(&hub.fleet, id, Topic::Detections)).collect();
         let mut f = LoopbackFleet {
             agents: (0..ids.len()).map(|_| None).collect(),
-            fleet,
             ids,
-            session,
-            seen,
             hub,
+            decisions,
+            traffic,
             options,
-            secured,
+            _secured: secured,
             detection_keys,
-            _traffic: traffic,
+            _traffic: counted,
             _members: members,
         };
         for slot in 0..f.ids.len() {
@@ -171,52 +136,32 @@ impl LoopbackFleet {
     /// Starts the agent of `slot` (it must be stopped).
     pub fn start_agent(&mut self, slot: usize) -> Result<()> {
         assert!(self.agents[slot].is_none(), "agent {slot} is running");
-        let id = &self.ids[slot];
-        let mut cmd = Command::new(&self.options.agent);
-        cmd.args(["--robot-id", id.as_str(), "--fleet", self.fleet.as_str()])
-            .args(["--cfg", r#"listen/endpoints:["tcp/127.0.0.1:0"]"#])
-            .args(["--cfg", &format!(r#"connect/endpoints:["{}"]"#, self.hub)])
-            .args(["--cfg", "scouting/multicast/enabled:false"])
-            .args(self.options.agent_cfg.iter().flat_map(|c| ["--cfg", c.as_str()]))
-            .env("RUST_LOG", "warn,zenoh=error")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null());
-        if let Some(m) = &self.options.models {
-            cmd.arg("--models").arg(m);
-        }
-        if let Some(s) = &self.secured {
-            cmd.arg("--fleet-dir").arg(&s.dir.root);
-        }
-        let child = cmd.spawn().with_context(|| format!("starting {}", self.options.agent.display()))?;
-        self.agents[slot] = Some(child);
+        let launch = Launch {
+            models: self.options.models.clone(),
+            cfg: &self.options.agent_cfg,
+            stderr: false,
+            ..Launch::new(&self.hub, &self.ids[slot])
+        };
+        self.agents[slot] = Some(AgentProcess::spawn(Command::new(&self.options.agent), launch)?);
         Ok(())
     }
 
     /// Stops the agent of `slot` as an operator would (SIGTERM: it leaves the fleet
     /// cleanly) and waits for it to exit.
     pub async fn stop_agent(&mut self, slot: usize) -> Result<()> {
-        let mut child = self.agents[slot].take().with_context(|| format!("agent {slot} is not running"))?;
-        signal(child.id(), "TERM")?;
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while child.try_wait()?.is_none() {
-            if Instant::now() > deadline {
-                let _ = child.kill();
-                bail!("{} did not exit within 10 s of SIGTERM", self.ids[slot]);
-            }
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+        let agent = self.agents[slot].take().with_context(|| format!("agent {slot} is not running"))?;
+        agent.stop().await?;
         Ok(())
     }
 
     /// Sends `sig` (e.g. "STOP", "CONT") to the running agent of `slot`.
     pub fn signal_agent(&self, slot: usize, sig: &str) -> Result<()> {
-        let child = self.agents[slot].as_ref().with_context(|| format!("agent {slot} is not running"))?;
-        signal(child.id(), sig)
+        self.agents[slot].as_ref().with_context(|| format!("agent {slot} is not running"))?.signal(sig)
     }
 
     /// The process id of the agent of `slot`, if running.
     pub fn pid(&self, slot: usize) -> Option<u32> {
-        self.agents[slot].as_ref().map(Child::id)
+        self.agents[slot].as_ref().map(AgentProcess::pid)
     }
 
     /// What the agent of `slot` uses of the machine (zeros when it is not running).
@@ -227,10 +172,10 @@ impl LoopbackFleet {
     /// Waits until `n` robots hold their liveliness tokens.
     pub async fn wait_members(&self, n: usize, limit: Duration) -> Result<()> {
         let since = Instant::now();
-        while self.seen.lock().expect("fleet observer").members != n {
+        let members = || self.traffic.lock().expect("traffic").members;
+        while members() != n {
             if since.elapsed() > limit {
-                let members = self.seen.lock().expect("fleet observer").members;
-                bail!("{members} agents hold a token, {n} expected within {limit:?}");
+                bail!("{} agents hold a token, {n} expected within {limit:?}", members());
             }
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
@@ -244,27 +189,10 @@ impl LoopbackFleet {
             self.ids.iter().enumerate().map(|(slot, id)| encode(&world.observe(slot, id))).collect();
         let sent = Instant::now();
         for (key, frame) in self.detection_keys.iter().zip(frames) {
-            self.session.put(key, frame).await.map_err(|e| anyhow!("{key}: {e}"))?;
+            self.hub.session.put(key, frame).await.map_err(|e| anyhow!("{key}: {e}"))?;
         }
         Ok(sent)
     }
-}
-
-impl Drop for LoopbackFleet {
-    fn drop(&mut self) {
-        for c in self.agents.iter_mut().flatten() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-fn signal(pid: u32, sig: &str) -> Result<()> {
-    let ok = Command::new("kill").args([&format!("-{sig}"), &pid.to_string()]).status()?.success();
-    if !ok {
-        bail!("kill -{sig} {pid} failed");
-    }
-    Ok(())
 }
 
 /// A layout with at least `n` robot slots: the file's slots, repeated with a small shift.
