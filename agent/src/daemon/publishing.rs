@@ -27,10 +27,19 @@ pub(super) struct Outbox {
 }
 
 impl Outbox {
-    /// Declares this robot's publishers (express: each message leaves at once, no
-    /// batching) and starts the thread that drives them.
+    /// Declares this robot's publishers and starts the thread that drives them.
+    /// Express: each message leaves at once, no batching. Best effort: a message is
+    /// worth something only within its tick, so on a link of mixed reliability (QUIC
+    /// with `mixed_rel=1`, deploy/README.md) it goes as a datagram, and a lost packet
+    /// loses that message (the ballot relay covers it) instead of holding up every
+    /// later one until it is resent. On TCP and TLS links nothing changes.
     pub async fn start(session: &zenoh::Session, fleet: &FleetId, robot: &RobotId) -> Result<Outbox> {
-        let declare = |t: Topic| session.declare_publisher(keys::robot_topic(fleet, robot, t)).express(true);
+        let declare = |t: Topic| {
+            session
+                .declare_publisher(keys::robot_topic(fleet, robot, t))
+                .express(true)
+                .reliability(zenoh::qos::Reliability::BestEffort)
+        };
         let publishers = Publishers {
             embedding: declare(Topic::Embedding).await.map_err(|e| anyhow!(e))?,
             vote: declare(Topic::Vote).await.map_err(|e| anyhow!(e))?,

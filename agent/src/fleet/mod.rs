@@ -126,7 +126,7 @@ mod tests {
         let e = secure_or_warn(&mut z, Some(root), "world", Role::Robot, "spwi-agent").unwrap_err().to_string();
         assert!(e.contains("world is a world") && e.contains("a robot"), "{e}");
         let creds = secure_or_warn(&mut z, Some(root), "r1", Role::Robot, "spwi-agent").unwrap().unwrap();
-        assert_eq!(z.get_json("transport/link/protocols").unwrap(), r#"["tls"]"#);
+        assert_eq!(z.get_json("transport/link/protocols").unwrap(), r#"["tls","quic"]"#);
         assert_eq!(fleet_id(None, Some(&creds)).unwrap().as_str(), "plant7");
         let e = fleet_id(Some(FleetId::new("other").unwrap()), Some(&creds)).unwrap_err().to_string();
         assert!(e.contains("--fleet other, but the fleet directory is for fleet plant7"), "{e}");

@@ -1,9 +1,10 @@
 //! A Zenoh config that admits only the fleet's members: mutual TLS on every link and
 //! default-deny access control generated from the roster.
 //!
-//! **TLS.** TLS is the only link protocol (so neither scouting nor a stray `tcp/`
-//! endpoint can fall back to plain TCP); `tcp/` endpoints of the given config are taken
-//! as `tls/` on the same address, so one Zenoh file serves open and secured fleets.
+//! **TLS.** TLS and QUIC (TLS 1.3 inside, the same certificates and checks) are the
+//! only link protocols (so neither scouting nor a stray `tcp/` endpoint can fall back to
+//! plain TCP); `tcp/` endpoints of the given config are taken as `tls/` on the same
+//! address, so one Zenoh file serves open and secured fleets; `quic/` endpoints stay.
 //! Both ends present their certificate and check the other's against the fleet's CA
 //! (`enable_mtls`). Host names are not checked (robots meet on addresses, not names):
 //! identity is the certificate's common name, and the access rules are written on it.
@@ -36,7 +37,7 @@ use spwi_proto::keys::{self, Topic};
 pub fn apply(c: &mut zenoh::Config, creds: &Credentials) -> Result<()> {
     let path = |p: &std::path::Path| Value::String(p.display().to_string());
     let settings = [
-        ("transport/link/protocols", json!(["tls"])),
+        ("transport/link/protocols", json!(["tls", "quic"])),
         ("transport/link/tls/root_ca_certificate", path(&creds.ca_cert)),
         ("transport/link/tls/listen_certificate", path(&creds.cert)),
         ("transport/link/tls/listen_private_key", path(&creds.key)),

@@ -38,6 +38,13 @@ impl Hub {
         Self::open(config, creds.roster.fleet.clone(), Some(dir.to_owned())).await
     }
 
+    /// The same, listening on `endpoint` (`tls/…` or `quic/…`).
+    pub async fn start_secured_listening(dir: &Path, identity: &str, endpoint: &str) -> Result<Hub> {
+        let (mut config, creds) = secured_peer(dir, identity, &[])?;
+        config.insert_json5("listen/endpoints", &serde_json::to_string(&[endpoint])?).map_err(|e| anyhow!(e))?;
+        Self::open(config, creds.roster.fleet.clone(), Some(dir.to_owned())).await
+    }
+
     async fn open(config: zenoh::Config, fleet: FleetId, fleet_dir: Option<PathBuf>) -> Result<Hub> {
         let session = zenoh::open(config).await.map_err(|e| anyhow!("the hub's zenoh session: {e}"))?;
         let locator =
