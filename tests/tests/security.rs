@@ -4,7 +4,8 @@
 //!
 //! Covers: the members decide together while a plain-TCP peer, a TLS peer without a
 //! certificate, a peer with another CA's certificate and one with an expired
-//! certificate never get a link, never count as members and never reach anyone; a
+//! certificate never get a link, never count as members and never reach anyone (nor,
+//! on a QUIC listener, a QUIC peer without a certificate or with a wrong one); a
 //! member cannot publish a vote, embedding, decision or detections as another robot nor
 //! hold its liveliness token (also as a whole daemon started under a stolen id); a
 //! revoked robot cannot rejoin with its old files; a router on the path forwards a
@@ -249,6 +250,43 @@ async fn outsiders_get_no_link_and_are_never_counted() {
         assert!(Credentials::load(&dirs.fleet, "r4").unwrap_err().to_string().contains("expired on"));
         for a in agents {
             a.stop().await.unwrap();
+        }
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn outsiders_get_no_quic_link_either() {
+    let _serial = serial().await;
+    within!(60, "the test", async {
+        let dirs = Dirs::make("quic");
+        let hub =
+            Hub::start_secured_listening(&dirs.fleet.root, "world", "quic/127.0.0.1:0?mixed_rel=1").await.unwrap();
+        assert!(hub.locator.starts_with("quic/"), "the hub listens on {}", hub.locator);
+        let quic_peer = |ca: &Path, presented: Option<(PathBuf, PathBuf)>| {
+            let mut c = tls_peer(&hub.locator, ca, presented);
+            c.insert_json5("transport/link/protocols", r#"["quic"]"#).unwrap();
+            c
+        };
+        // A control: a member's own session does get a QUIC link.
+        let (member, _) = secured_peer(&dirs.fleet.root, "r3", std::slice::from_ref(&hub.locator)).unwrap();
+        let member = open(member, "r3").await;
+        let outsiders = [
+            (quic_peer(&dirs.fleet.ca_cert(), None), "nocert"),
+            (quic_peer(&dirs.other.ca_cert(), Some((dirs.other.member_cert("r9"), dirs.other.member_key("r9")))), "r9"),
+            (quic_peer(&dirs.fleet.ca_cert(), Some((dirs.fleet.member_cert("r4"), dirs.fleet.member_key("r4")))), "r4"),
+        ];
+        let mut sessions = Vec::new();
+        for (config, name) in outsiders {
+            sessions.push((open(config, name).await, name));
+        }
+        tokio::time::sleep(Duration::from_secs(3)).await; // connection retries
+        assert!(
+            member.info().peers_zid().await.count() >= 1,
+            "the member r3 got no QUIC link: the test proves nothing"
+        );
+        for (s, name) in &sessions {
+            let links = s.info().peers_zid().await.count();
+            assert_eq!(links, 0, "outsider {name} got {links} QUIC links into the fleet");
         }
     });
 }
