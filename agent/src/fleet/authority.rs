@@ -112,6 +112,13 @@ impl ThrowawayFleet {
         create(&dir, fleet, members, Validity::days(1))?;
         Ok(ThrowawayFleet { dir })
     }
+
+    /// A fleet of the world and `robots`, the members a simulated fleet needs.
+    pub fn with_world(label: &str, fleet: &FleetId, robots: &[RobotId]) -> Result<ThrowawayFleet> {
+        let members: Vec<(&str, Role)> =
+            std::iter::once(("world", Role::World)).chain(robots.iter().map(|r| (r.as_str(), Role::Robot))).collect();
+        Self::create(label, fleet, &members)
+    }
 }
 
 impl Drop for ThrowawayFleet {

@@ -7,7 +7,6 @@
 use super::{AgentProcess, Decisions, Hub, Launch};
 use anyhow::{anyhow, bail, Context, Result};
 use spwi_agent::fleet::authority::ThrowawayFleet;
-use spwi_agent::fleet::Role;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::{encode, FleetId, RobotId};
 use spwi_world::layout::Layout;
@@ -68,9 +67,7 @@ impl LoopbackFleet {
         let fleet = format!("bench{}", std::process::id());
         let ids: Vec<RobotId> = (0..options.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
         let (hub, secured) = if options.secured {
-            let members: Vec<(&str, Role)> =
-                std::iter::once(("world", Role::World)).chain(ids.iter().map(|r| (r.as_str(), Role::Robot))).collect();
-            let secured = ThrowawayFleet::create("bench", &FleetId::new(&fleet)?, &members)?;
+            let secured = ThrowawayFleet::with_world("bench", &FleetId::new(&fleet)?, &ids)?;
             (Hub::start_secured(&secured.dir.root, "world").await?, Some(secured))
         } else {
             (Hub::start(&fleet).await?, None)

@@ -34,8 +34,7 @@ impl Hub {
 
     /// A hub of the secured fleet in `dir`, presenting the certificate of `identity`.
     pub async fn start_secured(dir: &Path, identity: &str) -> Result<Hub> {
-        let (config, creds) = secured_peer(dir, identity, &[])?;
-        Self::open(config, creds.roster.fleet.clone(), Some(dir.to_owned())).await
+        Self::start_secured_listening(dir, identity, "tls/127.0.0.1:0").await
     }
 
     /// The same, listening on `endpoint` (`tls/…` or `quic/…`).
