@@ -46,7 +46,7 @@
 
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
-use crate::floor::{self, CameraCalibration, FloorView, RELATION_DIM};
+use crate::floor::{self, CameraCalibration, FloorView, StationMap, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
@@ -312,6 +312,13 @@ impl Engine {
     /// What this robot knows on the floor: its track and its own and team maps.
     pub fn floor(&self) -> &FloorView {
         &self.floor
+    }
+
+    /// Starts from station maps built before (a fleet that knows the floor): this
+    /// robot's own and its team's. The worker's track starts afresh.
+    pub fn adopt_maps(&mut self, own: StationMap, team: StationMap) {
+        self.floor.own_map = own;
+        self.floor.team_map = team;
     }
 
     /// Our own feed repeats itself: we set it aside until it changes.

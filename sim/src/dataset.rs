@@ -22,14 +22,15 @@
 //! `dataset.json` describes every array.
 
 use crate::npy::NpyWriter;
+use crate::team_floor::TeamFloor;
 use crate::world_args::{check_robots, WorldArgs};
 use anyhow::{Context, Result};
 use serde_json::json;
-use spwi_agent::floor::{self, FloorView, RELATION_DIM};
+use spwi_agent::floor::{self, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::model::{Backend, Gcn};
 use spwi_agent::temporal::normalise_keypoints;
-use spwi_proto::{RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
+use spwi_proto::{DetectionFrame, RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
 use spwi_world::generate::NamedLayout;
 use spwi_world::world::{Scenario, World};
 use std::path::{Path, PathBuf};
@@ -167,7 +168,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     for e in 0..o.episodes {
         let floor = &o.floors[e as usize % o.floors.len()].layout;
         let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
-        let mut views = vec![FloorView::new(crate::calibration::of(&floor.camera)); o.robots];
+        let mut team_floor = TeamFloor::new(crate::calibration::of(&floor.camera), o.robots);
         let total = o.ticks as usize + FUTURE;
         let mut intents = Vec::with_capacity(total);
         let mut phases = Vec::with_capacity(total);
@@ -179,11 +180,10 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             if t >= o.ticks {
                 continue; // only the truth of these ticks is needed
             }
+            let frames: Vec<DetectionFrame> =
+                ids.iter().enumerate().map(|(slot, id)| world.observe(slot, id)).collect();
             let mut tick_rows = Vec::with_capacity(o.robots);
-            let mut shared = Vec::with_capacity(o.robots);
-            for (slot, id) in ids.iter().enumerate() {
-                let frame = world.observe(slot, id);
-                shared.push(views[slot].observe(&frame));
+            for (slot, frame) in frames.iter().enumerate() {
                 let keypoints = frame
                     .human
                     .as_ref()
@@ -199,7 +199,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                     relations_ego: vec![0.0; RELATION_DIM],
                     relations_team: vec![0.0; RELATION_DIM],
                 };
-                if let Some(g) = graph.build(&frame) {
+                if let Some(g) = graph.build(frame) {
                     if t % o.spatial_every == 0 {
                         sp.x.push(&g.x)?;
                         sp.adj.push(&g.adj)?;
@@ -224,16 +224,10 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             }
             // What each robot's engine computes at its vote step, every other robot of
             // the episode being a peer whose estimate and landmarks arrived.
-            let team = floor::fuse(shared.iter().filter_map(|(w, _)| w.as_ref()));
+            let (own, team) = team_floor.observe(&frames);
             for (slot, row) in tick_rows.iter_mut().enumerate() {
-                for (peer, (_, landmarks)) in shared.iter().enumerate() {
-                    if peer != slot {
-                        views[slot].add_peer_landmarks(landmarks);
-                    }
-                }
-                views[slot].observe_worker(shared[slot].0.as_ref(), team.as_ref());
-                let v = &views[slot];
-                floor::relations(shared[slot].0.as_ref(), &v.own_map.stations(), &mut row.relations_ego);
+                let v = team_floor.view(slot);
+                floor::relations(own[slot].as_ref(), &v.own_map.stations(), &mut row.relations_ego);
                 floor::relations(team.as_ref(), &v.team_map.stations(), &mut row.relations_team);
             }
             rows.push(tick_rows);

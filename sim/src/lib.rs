@@ -18,6 +18,7 @@
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
 //! world_args.rs the world every tool runs in (scenario, floors, cameras)
+//! team_floor.rs every robot's floor view when each hears every other; warm maps
 //! layout.rs     `spwi-sim layout`: a generated or mirrored floor to a TOML file
 //! ```
 
@@ -37,4 +38,5 @@ pub mod render;
 pub mod service;
 pub mod soak;
 pub mod stats;
+pub mod team_floor;
 pub mod world_args;

@@ -44,6 +44,11 @@ pub struct EvalArgs {
     /// worker it recorded once.
     #[arg(long, default_value_t = 0)]
     pub looping: usize,
+    /// Seconds the fleet has already worked on the floor when an episode starts: its
+    /// station maps are what its robots built watching another worker that long (0:
+    /// every episode starts with empty maps, a fleet's first seconds on a new floor).
+    #[arg(long, value_name = "SECONDS", default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=3600))]
+    pub warm_map: u32,
     /// Mean delay of a message between robots, ms (default: loopback-like, 0.5 ms).
     #[arg(long, default_value_t = 0.0)]
     pub delay: f64,
@@ -82,6 +87,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         loss,
         faulty,
         looping,
+        warm_map,
         delay,
         agent_config,
         json,
@@ -168,6 +174,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         ticks,
         faults: crate::eval::Faults { dropouts, loss, faulty, looping, delay_ms: delay },
         tick,
+        warm_map_ticks: warm_map * 10,
     })?;
     crate::eval::print(&report);
     if let Some(path) = json {

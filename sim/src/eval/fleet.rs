@@ -211,7 +211,14 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let spots = Station::ALL.map(|k| layout.station(k).work_spot);
     let pairs = layout.close_pairs();
     let in_close_pair = Station::ALL.map(|k| pairs.iter().any(|&(a, b)| a == k || b == k));
-    let engines = (0..n).map(|slot| engine(slot, o, layout)).collect::<Result<Vec<_>>>()?;
+    let mut engines = (0..n).map(|slot| engine(slot, o, layout)).collect::<Result<Vec<_>>>()?;
+    if o.warm_map_ticks > 0 {
+        let seed = crate::team_floor::warm_up_seed(episode_seed);
+        let warm = crate::team_floor::TeamFloor::warmed(layout, o.scenario, seed, n, o.warm_map_ticks)?;
+        for (engine, (own, team)) in engines.iter_mut().zip(warm.maps()) {
+            engine.adopt_maps(own.clone(), team.clone());
+        }
+    }
     let ids: Vec<RobotId> = engines.iter().map(|e| e.config().robot.clone()).collect();
     let mut observers = (0..n)
         .map(|_| Observers::new(&o.models, crate::calibration::of(&layout.camera)))

@@ -93,6 +93,9 @@ pub struct EvalOptions {
     /// The robots' `[tick]` settings (relay, stale feeds, deadlines): the daemon's
     /// defaults unless an agent config says otherwise.
     pub tick: TickConfig,
+    /// Ticks the fleet worked on the floor before each episode, building its station
+    /// maps (0: they start empty). See `team_floor`.
+    pub warm_map_ticks: u32,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -120,6 +123,8 @@ pub struct Report {
     pub floors: String,
     pub faults: Faults,
     pub tick: TickConfig,
+    /// Seconds the fleet worked on each floor before an episode (its maps warm).
+    pub warm_map_s: f64,
     /// gnn (t only), ego, collective, consensus (collective votes + consensus, on the
     /// ticks some robot decided), team_all_ticks (the same decision over every tick, no
     /// decision counting as wrong), cvm, cnn1d. Each model is scored on the ticks where
@@ -268,6 +273,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         floors: o.floors_name.clone(),
         faults: o.faults.clone(),
         tick: o.tick.clone(),
+        warm_map_s: f64::from(o.warm_map_ticks) / 10.0,
         models,
         close_pair,
         per_robot,
@@ -358,6 +364,9 @@ pub fn print(r: &Report) {
         r.ticks_per_episode,
         r.seed
     );
+    if r.warm_map_s > 0.0 {
+        println!("station maps warm: the fleet worked {} s on each floor before each episode", r.warm_map_s);
+    }
     if r.faults != Faults::default() {
         println!(
             "faults: {} dropping out half-way, {:.0}% messages lost, {} stuck and {} looping cameras, {} ms delay",
@@ -452,6 +461,7 @@ mod tests {
             ticks: 60,
             faults,
             tick: TickConfig::default(),
+            warm_map_ticks: 0,
         }
     }
 
@@ -487,6 +497,18 @@ mod tests {
         assert!(assembly.mapped > 0.5, "{assembly:?}");
         assert!(assembly.mean_error_m.unwrap() < 1.5 && assembly.far == Some(0.0), "{assembly:?}");
         assert!(r.map.iter().all(|p| (0.0..=1.0).contains(&p.mapped)), "{:?}", r.map);
+    }
+
+    #[test]
+    fn a_fleet_that_worked_on_the_floor_before_starts_with_its_stations_mapped() {
+        let cold = run(&options(fixture(), Faults::none())).unwrap();
+        let warm = run(&EvalOptions { warm_map_ticks: 300, ..options(fixture(), Faults::none()) }).unwrap();
+        assert_eq!(warm.warm_map_s, 30.0);
+        // With empty maps the first ticks of an episode find the assembly bench not yet
+        // seen three times; after 30 s of work it is on every robot's map from the start.
+        let assembly = |r: &Report| r.map[2].mapped;
+        assert!(assembly(&cold) < 1.0 && assembly(&warm) == 1.0, "{:?} / {:?}", cold.map, warm.map);
+        assert_eq!(warm.samples, cold.samples, "the same episodes scored");
     }
 
     #[test]

@@ -45,7 +45,15 @@ pub struct Studies {
     /// against ours (`models/default`), trained on the same data, with fixed cameras and
     /// with cameras that track the worker; ours with 1 to 4 robots under tracking.
     pub designs: Vec<Report>,
+    /// The default set with station maps warm ([`WARM_MAP_S`]): held-out floors with
+    /// fixed cameras and with tracking cameras (1 to 4 robots), the built-in floor,
+    /// moved and mirrored. Their cold twins are in `designs` and `generalisation`.
+    pub warm_maps: Vec<Report>,
 }
+
+/// How long the fleet of the warm-map study has worked on a floor before an episode:
+/// a minute, two episodes' length.
+pub const WARM_MAP_S: u32 = 60;
 
 /// Held-out generated floors of the generalisation study.
 pub const HELDOUT_FLOORS: &str = "heldout:0..50";
@@ -132,6 +140,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
             ticks: s.ticks,
             faults,
             tick,
+            warm_map_ticks: 0,
         })?;
         super::print(&r);
         println!();
@@ -148,6 +157,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         faults: Vec::new(),
         generalisation: Vec::new(),
         designs: Vec::new(),
+        warm_maps: Vec::new(),
     };
     for scenario in 1..=3 {
         st.scenarios.push(one(scenario, 3, &default, s.seed, Faults::none())?);
@@ -185,22 +195,6 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
     if let Some(r) = st.scenarios.iter().find(|r| r.scenario == 3) {
         st.generalisation.push(r.clone());
     }
-    for (name, floors) in unseen_floors(&s.floors_name, s.camera)? {
-        let r = run(&EvalOptions {
-            scenario: Scenario::Dynamic,
-            robots: 3,
-            models: default.clone(),
-            floors,
-            floors_name: name,
-            episodes: s.episodes,
-            seed: s.seed,
-            ticks: s.ticks,
-            faults: Faults::none(),
-            tick: TickConfig::default(),
-        })?;
-        super::print(&r);
-        st.generalisation.push(r);
-    }
     let paper = s.models_root.join("paper");
     let paper =
         paper.join("manifest.json").is_file().then(|| ModelSet::load(&paper, Backend::Tract, None)).transpose()?;
@@ -211,25 +205,51 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         configs.push((&default, policy, 3));
     }
     configs.extend([1, 2, 4].map(|n| (&default, CameraPolicy::Track, n)));
-    for (models, policy, robots) in configs {
+    let on_heldout = |policy: CameraPolicy| {
         let mut floors = heldout.clone();
         floors.iter_mut().for_each(|f| f.layout.camera.policy = policy);
-        let r = run(&EvalOptions {
-            scenario: Scenario::Dynamic,
-            robots,
-            models: models.clone(),
-            floors,
-            floors_name: format!("{HELDOUT_FLOORS}, {policy:?} cameras"),
-            episodes: s.episodes,
-            seed: s.seed,
-            ticks: s.ticks,
-            faults: Faults::none(),
-            tick: TickConfig::default(),
-        })?;
-        super::print(&r);
-        st.designs.push(r);
+        (format!("{HELDOUT_FLOORS}, {policy:?} cameras"), floors)
+    };
+    let scenario_3 =
+        |models: &std::sync::Arc<ModelSet>, (name, floors): (String, Vec<NamedLayout>), robots: usize, warm_s: u32| {
+            let r = run(&EvalOptions {
+                scenario: Scenario::Dynamic,
+                robots,
+                models: models.clone(),
+                floors,
+                floors_name: name,
+                episodes: s.episodes,
+                seed: s.seed,
+                ticks: s.ticks,
+                faults: Faults::none(),
+                tick: TickConfig::default(),
+                warm_map_ticks: warm_s * 10,
+            })?;
+            super::print(&r);
+            anyhow::Ok(r)
+        };
+    for floors in unseen_floors(&s.floors_name, s.camera)? {
+        st.generalisation.push(scenario_3(&default, floors, 3, 0)?);
+    }
+    for (models, policy, robots) in configs {
+        st.designs.push(scenario_3(models, on_heldout(policy), robots, 0)?);
+    }
+    let mut warm: Vec<((String, Vec<NamedLayout>), usize)> = vec![(on_heldout(CameraPolicy::Fixed), 3)];
+    warm.extend([1, 2, 3, 4].map(|n| (on_heldout(CameraPolicy::Track), n)));
+    let other_floors = unseen_floors(&s.floors_name, s.camera)?.into_iter().filter(|(name, _)| name != HELDOUT_FLOORS);
+    warm.extend(other_floors.map(|f| (f, 3)));
+    for (floors, robots) in warm {
+        st.warm_maps.push(scenario_3(&default, floors, robots, WARM_MAP_S)?);
     }
     Ok(st)
+}
+
+/// "+9.0": the collective GRU's accuracy at t less the ego GRU's, in points.
+fn collective_minus_ego(r: &Report) -> String {
+    match (r.models.get("collective"), r.models.get("ego")) {
+        (Some(c), Some(e)) => format!("{:+.1}", 100.0 * (c.t - e.t)),
+        _ => "–".into(),
+    }
 }
 
 fn pct(v: f64) -> String {
@@ -496,10 +516,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         );
         let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for r in &st.designs {
-            let gap = match (r.models.get("collective"), r.models.get("ego")) {
-                (Some(c), Some(e)) => format!("{:+.1}", 100.0 * (c.t - e.t)),
-                _ => "–".into(),
-            };
+            let gap = collective_minus_ego(r);
             let cameras = r.floors.rsplit(", ").next().unwrap_or("");
             let _ = writeln!(
                 w,
@@ -519,8 +536,48 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             );
         }
     }
+    if !st.warm_maps.is_empty() {
+        let _ =
+            writeln!(w, "\n## A fleet that knows the floor: station maps warm (scenario 3, default set, 2 s → 2 s)\n");
+        let _ = writeln!(
+            w,
+            "A daemon keeps its station map for as long as it runs, so a fleet that has worked on a floor for a while has mapped every station its cameras have seen; every table above starts each 30 s episode with empty maps instead, a fleet's first seconds on a floor. Here the robots first work {WARM_MAP_S} s on the floor (unscored, another worker, the same robots; `spwi-sim eval --warm-map {WARM_MAP_S}`, `sim/src/team_floor.rs`), then the episode is scored as above. The maps still come from the robots' own detections only; the models never saw these floors. Each warm row follows its cold twin from the tables above. *Farther station*: recall of the station of a close pair the worker's walk reaches second.\n"
+        );
+        let _ = writeln!(
+            w,
+            "| floors | robots | maps | team, all ticks | coverage | ego t | collective t | collective − ego | consensus t | CVM t | goal unmapped | farther station, collective t | agreement |"
+        );
+        let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+        for warm in &st.warm_maps {
+            let cold = st.designs.iter().chain(&st.generalisation).find(|r| {
+                r.floors == warm.floors
+                    && r.robots == warm.robots
+                    && r.model_set == warm.model_set
+                    && r.warm_map_s == 0.0
+            });
+            for r in cold.into_iter().chain([warm]) {
+                let maps = if r.warm_map_s > 0.0 { format!("warm, {} s", r.warm_map_s) } else { "empty".into() };
+                let _ = writeln!(
+                    w,
+                    "| {} | {} | {maps} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                    r.floors,
+                    r.robots,
+                    acc(r, "team_all_ticks").0,
+                    pct(r.coverage),
+                    acc(r, "ego").0,
+                    acc(r, "collective").0,
+                    collective_minus_ego(r),
+                    acc(r, "consensus").0,
+                    acc(r, "cvm").0,
+                    pct(r.goal_unmapped_share),
+                    acc_in(&r.close_pair, "collective_farther").0,
+                    pct(r.agreement)
+                );
+            }
+        }
+    }
     // The first generalisation column is the scenario-3 run of Table II again.
-    let total: f64 = [&st.scenarios, &st.robots, &st.horizons, &st.resolution, &st.faults, &st.designs]
+    let total: f64 = [&st.scenarios, &st.robots, &st.horizons, &st.resolution, &st.faults, &st.designs, &st.warm_maps]
         .iter()
         .flat_map(|v| v.iter())
         .chain(st.generalisation.iter().skip(1))
