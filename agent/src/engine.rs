@@ -137,6 +137,8 @@ pub enum Input {
     Ballots(BallotsMsg),
     /// A peer decision, compared with ours to measure agreement.
     Decision(DecisionMsg),
+    /// Where a member's map puts the stations (sent when a robot joins).
+    Map(MapMsg),
     MemberJoined(RobotId),
     MemberLeft(RobotId),
     /// Time passed: deadlines may have expired.
@@ -150,6 +152,8 @@ pub enum Output {
     Vote(VoteMsg),
     Ballots(BallotsMsg),
     Decision(DecisionMsg),
+    /// Our team map, for a robot that just joined.
+    Map(MapMsg),
 }
 
 /// Our own part of a tick.
@@ -380,9 +384,22 @@ impl Engine {
             }
             Input::Ballots(b) => self.on_ballots(b, now, &mut out),
             Input::Decision(d) => self.compare(&d),
+            Input::Map(m) => {
+                // A peer's map fills in the stations ours lacks (floor/stations.rs);
+                // not from a peer whose feed is stale or whom we doubt.
+                if m.robot != self.cfg.robot && !self.peer_is_stale(&m.robot) && self.trust.fuses(&m.robot) {
+                    self.floor.team_map.borrow(&m.stations);
+                }
+            }
             Input::MemberJoined(r) => {
-                if r != self.cfg.robot {
-                    self.live.insert(r);
+                // A robot that joins has mapped nothing yet: we tell it what we have.
+                let stations = self.floor.team_map.own_stations();
+                if r != self.cfg.robot && self.live.insert(r) && stations.iter().any(Option::is_some) {
+                    out.push(Output::Map(MapMsg {
+                        robot: self.cfg.robot.clone(),
+                        instance: self.cfg.instance,
+                        stations,
+                    }));
                 }
             }
             Input::MemberLeft(r) => {
@@ -1070,6 +1087,38 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_robot_that_joins_is_sent_the_team_map_and_takes_it_for_what_it_has_not_seen() {
+        let set = models();
+        let (mut a, mut b) = (engine("a", &set), engine("b", &set));
+        assert!(a.handle(Input::MemberJoined(id("b")), ms(0)).is_empty(), "nothing mapped, nothing to send");
+        let sighting = |station, x: f32| Landmark { station, position: [x, 9.0], sigma: 0.3 };
+        for l in [sighting(Station::Manufacturing, 9.0), sighting(Station::Storage, 2.0)] {
+            for _ in 0..3 {
+                a.floor.team_map.add(&l);
+            }
+        }
+        b.floor.team_map.borrow(&[None, None, None, Some([50.0, 50.0])]); // heard from another
+        let map = |out: Vec<Output>| match out.as_slice() {
+            [Output::Map(m)] => m.clone(),
+            other => panic!("expected the map alone, got {other:?}"),
+        };
+        let sent = map(a.handle(Input::MemberJoined(id("c")), ms(1)));
+        assert_eq!(sent.robot, id("a"));
+        assert_eq!(sent.stations[Station::Manufacturing.index()], Some([9.0, 9.0]));
+        assert!(a.handle(Input::MemberJoined(id("c")), ms(2)).is_empty(), "once per join");
+        b.handle(Input::Map(sent.clone()), ms(3));
+        assert_eq!(b.floor().team_map.station(Station::Storage), Some([2.0, 9.0]));
+        assert_eq!(b.floor().team_map.station(Station::Manufacturing), Some([29.5, 29.5]), "the mean of two peers'");
+        assert_eq!(b.floor().own_map.stations(), [None; 4], "its own map is its own sightings");
+        let echo = MapMsg { robot: id("b"), stations: [Some([7.0, 7.0]), None, None, None], ..sent };
+        assert!(b.handle(Input::Map(echo), ms(4)).is_empty());
+        assert_eq!(b.floor().team_map.station(Station::Storage), Some([2.0, 9.0]), "its own echo is ignored");
+        // A robot that left and comes back is sent the map again.
+        a.handle(Input::MemberLeft(id("c")), ms(5));
+        map(a.handle(Input::MemberJoined(id("c")), ms(6)));
+    }
+
+    #[test]
     fn a_relation_set_votes_from_a_fresh_track_and_says_so() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
         let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
@@ -1122,6 +1171,7 @@ pub(crate) mod tests {
                 Output::Vote(m) => Input::Vote(m),
                 Output::Ballots(m) => Input::Ballots(m),
                 Output::Decision(m) => Input::Decision(m),
+                Output::Map(m) => Input::Map(m),
             })
             .collect()
     }

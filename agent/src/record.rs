@@ -89,29 +89,33 @@ enum Channel {
     InVote,
     InBallots,
     InDecision,
+    InMap,
     InMembership,
     InPoll,
     OutEmbedding,
     OutVote,
     OutBallots,
     OutDecision,
+    OutMap,
     State,
 }
 
 impl Channel {
-    const ALL: [Channel; 13] = [
+    const ALL: [Channel; 15] = [
         Channel::Config,
         Channel::InDetections,
         Channel::InEmbedding,
         Channel::InVote,
         Channel::InBallots,
         Channel::InDecision,
+        Channel::InMap,
         Channel::InMembership,
         Channel::InPoll,
         Channel::OutEmbedding,
         Channel::OutVote,
         Channel::OutBallots,
         Channel::OutDecision,
+        Channel::OutMap,
         Channel::State,
     ];
 
@@ -123,12 +127,14 @@ impl Channel {
             Channel::InVote => "/spwi/in/vote",
             Channel::InBallots => "/spwi/in/ballots",
             Channel::InDecision => "/spwi/in/decision",
+            Channel::InMap => "/spwi/in/map",
             Channel::InMembership => "/spwi/in/membership",
             Channel::InPoll => "/spwi/in/poll",
             Channel::OutEmbedding => "/spwi/out/embedding",
             Channel::OutVote => "/spwi/out/vote",
             Channel::OutBallots => "/spwi/out/ballots",
             Channel::OutDecision => "/spwi/out/decision",
+            Channel::OutMap => "/spwi/out/map",
             Channel::State => "/spwi/state",
         }
     }
@@ -182,6 +188,7 @@ impl Recorder {
             Input::Vote(m) => self.write(Channel::InVote, now, &encode(m)),
             Input::Ballots(m) => self.write(Channel::InBallots, now, &encode(m)),
             Input::Decision(m) => self.write(Channel::InDecision, now, &encode(m)),
+            Input::Map(m) => self.write(Channel::InMap, now, &encode(m)),
             Input::MemberJoined(r) | Input::MemberLeft(r) => {
                 let alive = matches!(input, Input::MemberJoined(_));
                 let json = serde_json::to_vec(&MembershipRecord { robot: r.clone(), alive })?;
@@ -197,6 +204,7 @@ impl Recorder {
             Output::Vote(m) => self.write(Channel::OutVote, now, &encode(m)),
             Output::Ballots(m) => self.write(Channel::OutBallots, now, &encode(m)),
             Output::Decision(m) => self.write(Channel::OutDecision, now, &encode(m)),
+            Output::Map(m) => self.write(Channel::OutMap, now, &encode(m)),
         }
     }
 
@@ -246,6 +254,7 @@ pub fn read(path: &Path) -> Result<Recording> {
             Some(Channel::InVote) => inputs.push((now, Input::Vote(decode(d).with_context(ctx)?))),
             Some(Channel::InBallots) => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
             Some(Channel::InDecision) => inputs.push((now, Input::Decision(decode(d).with_context(ctx)?))),
+            Some(Channel::InMap) => inputs.push((now, Input::Map(decode(d).with_context(ctx)?))),
             Some(Channel::InMembership) => {
                 let r: MembershipRecord = serde_json::from_slice(d).with_context(ctx)?;
                 inputs.push((now, if r.alive { Input::MemberJoined(r.robot) } else { Input::MemberLeft(r.robot) }));
@@ -255,6 +264,7 @@ pub fn read(path: &Path) -> Result<Recording> {
             Some(Channel::OutVote) => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
             Some(Channel::OutBallots) => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
             Some(Channel::OutDecision) => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
+            Some(Channel::OutMap) => outputs.push(Output::Map(decode(d).with_context(ctx)?)),
             Some(Channel::State) => states.push(serde_json::from_slice(d).with_context(ctx)?),
             None => bail!("{}: unknown topic {:?} (not a spwi recording?)", path.display(), m.channel.topic),
         }

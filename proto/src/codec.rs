@@ -60,6 +60,7 @@ message!(EmbeddingMsg, "embedding", robot);
 message!(VoteMsg, "vote", robot);
 message!(DecisionMsg, "decision", robot);
 message!(BallotsMsg, "ballots", robot);
+message!(MapMsg, "map", robot);
 message!(TruthMsg, "truth");
 
 /// Why bytes were refused. Every variant names what was wrong.
@@ -210,6 +211,16 @@ mod tests {
         assert!(e.contains("quality"), "{e}");
         let e = decode::<VoteMsg>(&encode(&VoteMsg { signature: vec![1; 10], ..vote() })).unwrap_err().to_string();
         assert!(e.contains("signature") && e.contains("10 bytes"), "{e}");
+        let map = |p: [f32; 2]| MapMsg {
+            robot: RobotId::new("r1").unwrap(),
+            instance: 1,
+            stations: [None, Some(p), None, None],
+        };
+        assert_eq!(decode::<MapMsg>(&encode(&map([3.0, -4.0]))), Ok(map([3.0, -4.0])));
+        for bad in [[f32::INFINITY, 0.0], [0.0, 2e4]] {
+            let e = decode::<MapMsg>(&encode(&map(bad))).unwrap_err().to_string();
+            assert!(e.contains("stations"), "{e}");
+        }
     }
 
     /// A vote as protocol 5 carried it before [`Station`] existed: the class a bare byte.

@@ -7,6 +7,7 @@
 //! | `spwi/<fleet>/robot/<robot>/vote`        | [`VoteMsg`]                     | agent          |
 //! | `spwi/<fleet>/robot/<robot>/decision`    | [`DecisionMsg`]                 | agent          |
 //! | `spwi/<fleet>/robot/<robot>/ballots`     | [`BallotsMsg`] (relayed votes)  | agent          |
+//! | `spwi/<fleet>/robot/<robot>/map`         | [`MapMsg`] (when a robot joins) | agent          |
 //! | `spwi/<fleet>/alive/<robot>`             | liveliness token (no payload)   | agent          |
 //! | `spwi/<fleet>/world/truth`               | [`TruthMsg`]                    | simulated world |
 //!
@@ -15,6 +16,7 @@
 //! [`VoteMsg`]: crate::VoteMsg
 //! [`DecisionMsg`]: crate::DecisionMsg
 //! [`BallotsMsg`]: crate::BallotsMsg
+//! [`MapMsg`]: crate::MapMsg
 //! [`TruthMsg`]: crate::TruthMsg
 
 use crate::id::{FleetId, RobotId};
@@ -29,10 +31,12 @@ pub enum Topic {
     Vote,
     Decision,
     Ballots,
+    Map,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 5] = [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Ballots];
+    pub const ALL: [Topic; 6] =
+        [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Ballots, Topic::Map];
 
     pub fn as_str(self) -> &'static str {
         match self {
@@ -41,6 +45,7 @@ impl Topic {
             Topic::Vote => "vote",
             Topic::Decision => "decision",
             Topic::Ballots => "ballots",
+            Topic::Map => "map",
         }
     }
 

@@ -3,7 +3,7 @@
 //! from the network has the dimensions documented here and only finite floats.
 
 use crate::id::RobotId;
-use crate::station::Station;
+use crate::station::{Station, NUM_CLASSES};
 use serde::{Deserialize, Serialize};
 
 /// Length of an appearance feature (the paper's ResNet50 output) and of the global
@@ -239,6 +239,33 @@ pub struct Landmark {
     pub position: [f32; 2],
     /// Standard deviation of the position (m): grows with the distance it was seen at.
     pub sigma: f32,
+}
+
+/// Where a robot's team map puts each station (`None`: not mapped), sent to a robot
+/// that joins, so that it need not wait for every station to come into view again:
+/// with cameras that turn to the worker, a station may not be seen for minutes.
+/// Each position is a station's work spot as the worker was seen using it, or the
+/// centre of the objects that mark it, in the floor frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MapMsg {
+    pub robot: RobotId,
+    pub instance: u64,
+    pub stations: [Option<[f32; 2]>; NUM_CLASSES],
+}
+
+/// Largest floor coordinate a map may carry (m): a floor is not 10 km across.
+pub const MAX_FLOOR_M: f32 = 10_000.0;
+
+impl Validate for MapMsg {
+    fn validate(&self) -> Result<(), Invalid> {
+        for p in self.stations.iter().flatten() {
+            finite("stations", p)?;
+            if p.iter().any(|x| x.abs() > MAX_FLOOR_M) {
+                return Err(invalid("stations", format!("{p:?} lies more than {MAX_FLOOR_M} m out")));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A robot's GCN output for one tick, shared so peers can run the collective GRU.

@@ -3,10 +3,13 @@
 //!
 //! Covers: every agent decides every tick and all agree (1, 3 and 8 agents); an agent
 //! that leaves gracefully is out of the member count within 1.5 s and the others go on
-//! without a gap; an agent that joins mid-run is counted within a second and decides.
+//! without a gap; an agent that joins mid-run is counted within a second and decides,
+//! and is sent every member's station map.
 //! Run: `cargo test -p spwi-tests --test fleet`.
 
 use spwi_agent::config::AgentConfig;
+use spwi_proto::keys::{self, Topic};
+use spwi_proto::{decode, MapMsg};
 use spwi_tests::*;
 use std::time::{Duration, Instant};
 
@@ -175,6 +178,62 @@ async fn a_recorded_run_replays_to_the_same_decisions_bit_for_bit() {
         for d in &decided {
             assert_eq!(live[&ids[0]].get(&d.tick), Some(d), "tick {}", d.tick);
         }
+        std::fs::remove_file(file).unwrap();
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_robot_that_joins_a_working_fleet_is_sent_its_station_map() {
+    let _serial = serial().await;
+    within!(60, "test", async {
+        let hub = Hub::start("maps").await.unwrap();
+        let models = models();
+        let collector = hub.decisions().await.unwrap();
+        let sent = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let s = sent.clone();
+        let _maps = hub
+            .session
+            .declare_subscriber(keys::all_robots(&hub.fleet, Topic::Map))
+            .callback(move |m| s.lock().unwrap().push(decode::<MapMsg>(&m.payload().to_bytes()).unwrap()))
+            .await
+            .unwrap();
+        let ids = robots(3);
+        let mut agents = Vec::new();
+        for r in &ids[..2] {
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
+        }
+        let publisher = Publisher::start(&hub, ids.clone(), TICK);
+        collector.wait_members(&ids[..2], 2, Instant::now(), Duration::from_secs(5)).await.unwrap();
+        tokio::time::sleep(Duration::from_secs(1)).await; // the station objects in view, seen 10 times
+        assert!(sent.lock().unwrap().is_empty(), "no map sent while nobody joins");
+
+        let file = std::env::temp_dir().join(format!("spwi-joiner-{}.mcap", std::process::id()));
+        let joiner =
+            InProcessAgent::start_recording(&hub, &ids[2], &models, AgentConfig::default(), Some(file.clone()))
+                .await
+                .unwrap();
+        collector.wait_members(&ids, 3, Instant::now(), Duration::from_secs(5)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        drop(publisher);
+        joiner.stop().await.unwrap();
+        for a in agents {
+            a.stop().await.unwrap();
+        }
+
+        let sent = sent.lock().unwrap().clone();
+        let senders: Vec<_> = sent.iter().map(|m| m.robot.clone()).collect();
+        assert_eq!(senders.len(), 2, "each member sends its map once when r2 joins: {senders:?}");
+        assert!(senders.contains(&ids[0]) && senders.contains(&ids[1]), "{senders:?}");
+        assert!(sent.iter().all(|m| m.stations.iter().any(Option::is_some)), "{sent:?}");
+        // ... and the joiner got both, through its own subscription
+        let recording = spwi_agent::record::read(&file).unwrap();
+        let received: Vec<_> = recording
+            .inputs
+            .iter()
+            .filter_map(|(_, i)| if let spwi_agent::engine::Input::Map(m) = i { Some(m.clone()) } else { None })
+            .collect();
+        assert_eq!(received.len(), 2, "{received:?}");
+        assert!(received.iter().all(|m| sent.contains(m)));
         std::fs::remove_file(file).unwrap();
     });
 }

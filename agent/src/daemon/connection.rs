@@ -40,14 +40,13 @@ pub(super) struct Connection {
 }
 
 impl Connection {
-    /// Opens the session, refuses a robot id a live daemon holds, declares this
-    /// robot's liveliness token and subscribes to what it reads: its own detections
-    /// and every robot's embeddings, votes, decisions and relayed ballots.
+    /// Opens the session, refuses a robot id a live daemon holds, subscribes to what
+    /// it reads (its own detections and every robot's embeddings, votes, decisions,
+    /// relayed ballots and station maps) and declares this robot's liveliness token.
     pub async fn open(zenoh: zenoh::Config, fleet: &FleetId, robot: &RobotId, queue: usize) -> Result<Connection> {
         let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
         let alive_key = keys::alive(fleet, robot);
         refuse_duplicate(&session, &alive_key, robot).await?;
-        let token = session.liveliness().declare_token(&alive_key).await.map_err(|e| anyhow!("{alive_key}: {e}"))?;
 
         let (tx, messages) = mpsc::channel::<Message>(queue);
         let overflow = Arc::new(AtomicU64::new(0));
@@ -58,6 +57,7 @@ impl Connection {
             (keys::all_robots(fleet, Topic::Vote), Topic::Vote),
             (keys::all_robots(fleet, Topic::Decision), Topic::Decision),
             (keys::all_robots(fleet, Topic::Ballots), Topic::Ballots),
+            (keys::all_robots(fleet, Topic::Map), Topic::Map),
         ] {
             let (tx, overflow, fleet) = (tx.clone(), overflow.clone(), fleet.clone());
             let sub = session
@@ -90,6 +90,9 @@ impl Connection {
                 .await
                 .map_err(|e| anyhow!("subscribing to membership: {e}"))?
         };
+        // The token last: a member that sees it sends us its station map at once, and
+        // our subscriptions, declared before on the same links, reach it first.
+        let token = session.liveliness().declare_token(&alive_key).await.map_err(|e| anyhow!("{alive_key}: {e}"))?;
         Ok(Connection { session, messages, membership, overflow, token, subscribers, membership_subscriber, alive_key })
     }
 

@@ -45,6 +45,12 @@ impl Outbox {
             vote: declare(Topic::Vote).await.map_err(|e| anyhow!(e))?,
             decision: declare(Topic::Decision).await.map_err(|e| anyhow!(e))?,
             ballots: declare(Topic::Ballots).await.map_err(|e| anyhow!(e))?,
+            // Sent once when a robot joins, useful for longer than a tick: reliable.
+            map: session
+                .declare_publisher(keys::robot_topic(fleet, robot, Topic::Map))
+                .reliability(zenoh::qos::Reliability::Reliable)
+                .await
+                .map_err(|e| anyhow!(e))?,
         };
         let (tx, rx) = mpsc::channel(OUTGOING_QUEUE);
         let thread = std::thread::Builder::new()
@@ -62,6 +68,7 @@ impl Outbox {
             Output::Vote(m) => (Topic::Vote, encode(m)),
             Output::Ballots(m) => (Topic::Ballots, encode(m)),
             Output::Decision(m) => (Topic::Decision, encode(m)),
+            Output::Map(m) => (Topic::Map, encode(m)),
         };
         let queued = self.tx.try_send(message).is_ok();
         if !queued {
@@ -91,6 +98,7 @@ struct Publishers {
     vote: zenoh::pubsub::Publisher<'static>,
     decision: zenoh::pubsub::Publisher<'static>,
     ballots: zenoh::pubsub::Publisher<'static>,
+    map: zenoh::pubsub::Publisher<'static>,
 }
 
 impl Publishers {
@@ -103,6 +111,7 @@ impl Publishers {
                 Topic::Vote => &self.vote,
                 Topic::Decision => &self.decision,
                 Topic::Ballots => &self.ballots,
+                Topic::Map => &self.map,
                 Topic::Detections => unreachable!("agents publish no detections"),
             };
             let started = Instant::now();

@@ -14,6 +14,12 @@
 //! the objects of a mapped station, is at work there, and once it has been seen there
 //! [`SPOT_SAMPLES`] ticks the station's position is where the worker stood (the mean
 //! of those positions) instead of its objects' centre.
+//!
+//! A robot that joins a working fleet has seen nothing yet, and with cameras that
+//! turn to the worker a station may stay out of view for minutes. So the members send
+//! it where their maps put each station ([`MapMsg`](spwi_proto::MapMsg)), and its team
+//! map [`borrow`](StationMap::borrow)s those positions for the stations it has not
+//! mapped itself, until it has.
 
 use spwi_proto::{Landmark, Station, WorkerEstimate, NUM_CLASSES};
 use std::collections::VecDeque;
@@ -57,17 +63,34 @@ impl Cluster {
     }
 }
 
-/// Where the worker was seen standing at work at one station: a running mean.
+/// Where the worker was seen standing at work at one station (or where peers put
+/// it): a running mean.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct WorkSpot {
     sum: [f64; 2],
     samples: u32,
 }
 
+impl WorkSpot {
+    fn add(&mut self, p: [f32; 2]) {
+        self.sum[0] += f64::from(p[0]);
+        self.sum[1] += f64::from(p[1]);
+        self.samples += 1;
+    }
+
+    /// The mean, once there are at least `min` samples.
+    fn mean(&self, min: u32) -> Option<[f32; 2]> {
+        let n = f64::from(self.samples);
+        (self.samples >= min.max(1)).then(|| [(self.sum[0] / n) as f32, (self.sum[1] / n) as f32])
+    }
+}
+
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct StationMap {
     clusters: Vec<Cluster>,
     spots: [WorkSpot; NUM_CLASSES],
+    /// Where peers' maps put each station: the mean of what they sent.
+    borrowed: [WorkSpot; NUM_CLASSES],
     /// The worker's last positions, while tracked well, oldest first.
     recent: VecDeque<[f32; 2]>,
 }
@@ -133,28 +156,39 @@ impl StationMap {
             return;
         };
         if !near().any(|(e, other)| other != station && e <= d + AMBIGUOUS_M) {
-            let spot = &mut self.spots[station.index()];
-            spot.sum[0] += f64::from(w.position[0]);
-            spot.sum[1] += f64::from(w.position[1]);
-            spot.samples += 1;
+            self.spots[station.index()].add(w.position);
         }
     }
 
-    /// Where each station stands, for the stations seen often enough.
+    /// Where each station stands, for the stations seen often enough or borrowed.
     pub fn stations(&self) -> [Option<[f32; 2]>; NUM_CLASSES] {
         Station::ALL.map(|s| self.station(s))
     }
 
     /// Where the worker stands to work at `station`, if it was seen there long enough,
-    /// else the centre of the station's objects, if they are on the map.
+    /// else the centre of the station's objects, if they are on the map, else where
+    /// peers' maps put it, if they sent one.
     pub fn station(&self, station: Station) -> Option<[f32; 2]> {
-        let objects = self.objects_centre(station)?;
-        let spot = self.spots[station.index()];
-        if spot.samples >= SPOT_SAMPLES {
-            let n = f64::from(spot.samples);
-            return Some([(spot.sum[0] / n) as f32, (spot.sum[1] / n) as f32]);
+        let Some(objects) = self.objects_centre(station) else {
+            return self.borrowed[station.index()].mean(1);
+        };
+        Some(self.spots[station.index()].mean(SPOT_SAMPLES).unwrap_or(objects))
+    }
+
+    /// A peer's map: its positions stand for the stations this map has not placed
+    /// itself (the mean of every peer's that sent one), until it has.
+    pub fn borrow(&mut self, stations: &[Option<[f32; 2]>; NUM_CLASSES]) {
+        for (k, p) in Station::ALL.into_iter().zip(stations) {
+            if let (Some(p), None) = (p, self.objects_centre(k)) {
+                self.borrowed[k.index()].add(*p);
+            }
         }
-        Some(objects)
+    }
+
+    /// What this map places itself, not what it borrowed: what it sends a robot that
+    /// joins (a borrowed position passed on would outlive the map it came from).
+    pub fn own_stations(&self) -> [Option<[f32; 2]>; NUM_CLASSES] {
+        Station::ALL.map(|s| self.objects_centre(s).map(|_| self.station(s).expect("placed")))
     }
 
     fn objects_centre(&self, station: Station) -> Option<[f32; 2]> {
@@ -258,6 +292,24 @@ mod tests {
             }
         }
         assert_eq!(m.stations()[0], None);
+    }
+
+    #[test]
+    fn a_peers_map_stands_for_the_stations_not_seen_until_they_are() {
+        let mut m = close_pair();
+        let peer = [Some([3.0, 3.0]), Some([3.0, 11.0]), Some([0.0, 0.0]), None];
+        let other = [Some([3.2, 3.4]), None, None, None];
+        m.borrow(&peer);
+        m.borrow(&other);
+        assert!(dist(m.station(Storage).unwrap(), [3.1, 3.2]) < 1e-3, "the mean of what peers sent");
+        assert_eq!(m.station(Workstation), Some([3.0, 11.0]));
+        assert!(dist(m.station(Assembly).unwrap(), [10.0, 11.0]) < 1e-3, "what it mapped itself wins");
+        assert_eq!(m.own_stations()[0], None, "a borrowed station is not passed on");
+        assert_eq!(m.own_stations()[2], m.station(Assembly));
+        for _ in 0..MIN_HITS {
+            m.add(&lm(Storage, 1.5, 2.0));
+        }
+        assert!(dist(m.station(Storage).unwrap(), [1.5, 2.0]) < 1e-3, "its own sightings take over");
     }
 
     #[test]

@@ -17,5 +17,6 @@ fuzz_target!(|data: &[u8]| {
     check::<VoteMsg>(data);
     check::<DecisionMsg>(data);
     check::<BallotsMsg>(data);
+    check::<MapMsg>(data);
     check::<TruthMsg>(data);
 });

@@ -128,6 +128,7 @@ impl Bus {
             Output::Vote(v) => Input::Vote(v.clone()),
             Output::Ballots(b) => Input::Ballots(b.clone()),
             Output::Decision(d) => Input::Decision(d.clone()),
+            Output::Map(m) => Input::Map(m.clone()),
         };
         for to in 0..self.engines.len() {
             if to == from || !self.live[to] {

@@ -395,6 +395,7 @@ fn encoded_len(o: &Output) -> usize {
         Output::Vote(m) => encode(m).len(),
         Output::Ballots(m) => encode(m).len(),
         Output::Decision(m) => encode(m).len(),
+        Output::Map(m) => encode(m).len(),
     }
 }
 
