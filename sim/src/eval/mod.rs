@@ -509,6 +509,31 @@ mod tests {
         let assembly = |r: &Report| r.map[2].mapped;
         assert!(assembly(&cold) < 1.0 && assembly(&warm) == 1.0, "{:?} / {:?}", cold.map, warm.map);
         assert_eq!(warm.samples, cold.samples, "the same episodes scored");
+
+        // The results page sets each warm run beside its cold twin.
+        let settings = studies::Settings {
+            models_root: "models".into(),
+            floors: Vec::new(),
+            floors_name: "test".into(),
+            camera: None,
+            episodes: 3,
+            seed: 5,
+            ticks: 60,
+        };
+        let st = studies::Studies {
+            scenarios: Vec::new(),
+            robots: Vec::new(),
+            horizons: Vec::new(),
+            resolution: Vec::new(),
+            faults: Vec::new(),
+            generalisation: vec![cold],
+            designs: Vec::new(),
+            warm_maps: vec![warm],
+        };
+        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        let rows: Vec<&str> = page.lines().filter(|l| l.starts_with("| test | 3 |")).collect();
+        assert_eq!(rows.len(), 2, "{page}");
+        assert!(rows[0].contains("| empty |") && rows[1].contains("| warm, 30 s |"), "{rows:?}");
     }
 
     #[test]
