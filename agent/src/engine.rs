@@ -393,13 +393,12 @@ impl Engine {
             }
             Input::MemberJoined(r) => {
                 // A robot that joins has mapped nothing yet: we tell it what we have.
-                let stations = self.floor.team_map.own_stations();
-                if r != self.cfg.robot && self.live.insert(r) && stations.iter().any(Option::is_some) {
-                    out.push(Output::Map(MapMsg {
-                        robot: self.cfg.robot.clone(),
-                        instance: self.cfg.instance,
-                        stations,
-                    }));
+                if r != self.cfg.robot && self.live.insert(r) {
+                    let stations = self.floor.team_map.own_stations();
+                    if stations.iter().any(Option::is_some) {
+                        let (robot, instance) = (self.cfg.robot.clone(), self.cfg.instance);
+                        out.push(Output::Map(MapMsg { robot, instance, stations }));
+                    }
                 }
             }
             Input::MemberLeft(r) => {

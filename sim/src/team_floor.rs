@@ -55,9 +55,6 @@ impl TeamFloor {
     pub fn warmed(layout: &Layout, scenario: Scenario, seed: u64, robots: usize, ticks: u32) -> Result<Self> {
         let camera = crate::calibration::of(&layout.camera);
         let mut team = TeamFloor::new(camera.clone(), robots);
-        if ticks == 0 {
-            return Ok(team);
-        }
         let mut world = World::new(layout.clone(), scenario, seed, robots);
         let ids: Vec<RobotId> = (0..robots).map(|i| RobotId::new(format!("r{i}"))).collect::<Result<_, _>>()?;
         for _ in 0..ticks {

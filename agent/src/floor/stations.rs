@@ -169,9 +169,13 @@ impl StationMap {
     /// else the centre of the station's objects, if they are on the map, else where
     /// peers' maps put it, if they sent one.
     pub fn station(&self, station: Station) -> Option<[f32; 2]> {
-        let Some(objects) = self.objects_centre(station) else {
-            return self.borrowed[station.index()].mean(1);
-        };
+        self.placed(station).or_else(|| self.borrowed[station.index()].mean(1))
+    }
+
+    /// Where this map places `station` from its own sightings: the worker's work spot
+    /// if seen long enough, else its objects' centre.
+    fn placed(&self, station: Station) -> Option<[f32; 2]> {
+        let objects = self.objects_centre(station)?;
         Some(self.spots[station.index()].mean(SPOT_SAMPLES).unwrap_or(objects))
     }
 
@@ -188,7 +192,7 @@ impl StationMap {
     /// What this map places itself, not what it borrowed: what it sends a robot that
     /// joins (a borrowed position passed on would outlive the map it came from).
     pub fn own_stations(&self) -> [Option<[f32; 2]>; NUM_CLASSES] {
-        Station::ALL.map(|s| self.objects_centre(s).map(|_| self.station(s).expect("placed")))
+        Station::ALL.map(|s| self.placed(s))
     }
 
     fn objects_centre(&self, station: Station) -> Option<[f32; 2]> {

@@ -228,16 +228,16 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
             super::print(&r);
             anyhow::Ok(r)
         };
-    for floors in unseen_floors(&s.floors_name, s.camera)? {
-        st.generalisation.push(scenario_3(&default, floors, 3, 0)?);
+    let unseen = unseen_floors(&s.floors_name, s.camera)?;
+    for floors in &unseen {
+        st.generalisation.push(scenario_3(&default, floors.clone(), 3, 0)?);
     }
     for (models, policy, robots) in configs {
         st.designs.push(scenario_3(models, on_heldout(policy), robots, 0)?);
     }
     let mut warm: Vec<((String, Vec<NamedLayout>), usize)> = vec![(on_heldout(CameraPolicy::Fixed), 3)];
     warm.extend([1, 2, 3, 4].map(|n| (on_heldout(CameraPolicy::Track), n)));
-    let other_floors = unseen_floors(&s.floors_name, s.camera)?.into_iter().filter(|(name, _)| name != HELDOUT_FLOORS);
-    warm.extend(other_floors.map(|f| (f, 3)));
+    warm.extend(unseen.into_iter().filter(|(name, _)| name != HELDOUT_FLOORS).map(|f| (f, 3)));
     for (floors, robots) in warm {
         st.warm_maps.push(scenario_3(&default, floors, robots, WARM_MAP_S)?);
     }
