@@ -8,6 +8,8 @@
 //! every robot decided the last (or after 200 ms), giving the fleet's maximum rate.
 //! `--secured` runs the fleet as deployed outside development: a fresh fleet directory
 //! (CA, the world, one identity per agent), mutual TLS and access control on every link.
+//! `--routers N` makes the robots Zenoh clients of N routers instead of a peer mesh;
+//! `--router-down-at` kills the first router mid-run, to see how the fleet carries on.
 
 use crate::loopback::percentile;
 use crate::loopback::{layout_with_slots, FleetOptions, LoopbackFleet, Usage};
@@ -25,6 +27,8 @@ pub struct BenchOptions {
     pub duration: Duration,
     pub free_running: bool,
     pub scenario: Scenario,
+    /// Kill router 0 this long after the measurement starts.
+    pub router_down_at: Option<Duration>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -52,6 +56,8 @@ pub struct BenchReport {
     pub free_running: bool,
     /// Mutual TLS and access control on every link (`--secured`).
     pub secured: bool,
+    /// 0: a peer mesh; N: the robots are clients of N routers (`--routers`).
+    pub routers: usize,
     pub ticks: u64,
     pub ticks_per_second: f64,
     /// Frame published → the last live robot's decision published, per tick.
@@ -60,6 +66,9 @@ pub struct BenchReport {
     pub agreement: f64,
     /// Ticks missing at least one robot's decision.
     pub incomplete_ticks: u64,
+    /// With `--router-down-at`: seconds from the router's death to the end of the last
+    /// incomplete tick after it (0: no tick went undecided).
+    pub router_down_gap_s: Option<f64>,
     /// Fraction of one core, mean over agents.
     pub cpu_per_agent: f64,
     pub rss_mb_per_agent: f64,
@@ -69,11 +78,12 @@ pub struct BenchReport {
 
 pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let robots = o.fleet.robots;
-    let fleet = LoopbackFleet::start(o.fleet.clone()).await?;
+    let mut fleet = LoopbackFleet::start(o.fleet.clone()).await?;
     let mut world = World::new(layout_with_slots(robots), o.scenario, 1, robots);
     let warmup = Duration::from_secs(2);
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
     let (mut cpu0, mut measure_from) = (Vec::new(), None);
+    let mut router_down_tick = None;
     let started = Instant::now();
     let mut next = Instant::now();
     loop {
@@ -86,6 +96,12 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         }
         if measure_from.is_some_and(|(t, _)| now - t >= o.duration) {
             break;
+        }
+        if let (Some(at), Some((since, _)), None) = (o.router_down_at, measure_from, router_down_tick) {
+            if now - since >= at {
+                fleet.kill_router(0)?;
+                router_down_tick = Some(world.tick + 1);
+            }
         }
         world.step();
         let t = world.tick;
@@ -114,9 +130,11 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let last_tick = world.tick;
     let ticks = last_tick + 1 - first_tick;
     let (mut latencies, mut agreed, mut complete, mut incomplete) = (Vec::new(), 0u64, 0u64, 0u64);
+    let mut last_incomplete = None;
     for t in first_tick..=last_tick {
         let Some(d) = decisions.get(&t).filter(|d| d.len() == robots) else {
             incomplete += 1;
+            last_incomplete = Some(t);
             continue;
         };
         complete += 1;
@@ -131,11 +149,16 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         robots,
         free_running: o.free_running,
         secured: o.fleet.secured,
+        routers: o.fleet.routers,
         ticks,
         ticks_per_second: ticks as f64 / elapsed,
         latency_ms: LatencyMs::of(&latencies),
         agreement: if complete == 0 { 0.0 } else { agreed as f64 / complete as f64 },
         incomplete_ticks: incomplete,
+        router_down_gap_s: router_down_tick.map(|down| {
+            let gap_ticks = last_incomplete.filter(|&t| t >= down).map_or(0, |t| t + 1 - down);
+            gap_ticks as f64 * spwi_proto::TICK_PERIOD.as_secs_f64()
+        }),
         cpu_per_agent: usage.iter().zip(&cpu0).map(|(u, c0)| (u.cpu_s - c0) / elapsed).sum::<f64>() / n,
         rss_mb_per_agent: usage.iter().map(|u| u.rss_mb).sum::<f64>() / n,
         msgs_per_tick_per_robot: messages as f64 / ticks as f64 / n,
@@ -145,10 +168,14 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
 
 pub fn print(r: &BenchReport) {
     println!(
-        "{} robots{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
+        "{} robots{}{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
         r.robots,
         if r.free_running { " (free-running)" } else { " at 10 Hz" },
         if r.secured { ", secured" } else { "" },
+        match r.routers {
+            0 => String::new(),
+            n => format!(", clients of {n} router{}", if n == 1 { "" } else { "s" }),
+        },
         r.ticks,
         r.ticks_per_second,
         r.latency_ms.p50,
@@ -161,6 +188,9 @@ pub fn print(r: &BenchReport) {
         r.msgs_per_tick_per_robot,
         r.bytes_per_tick_per_robot
     );
+    if let Some(gap) = r.router_down_gap_s {
+        println!("router 0 killed: every robot deciding again {gap:.1} s after");
+    }
 }
 
 /// The arguments of `spwi-sim bench`.
@@ -191,6 +221,15 @@ pub struct BenchArgs {
     /// (repeatable): to measure a tuning before making it a default.
     #[arg(long = "agent-cfg", value_name = "KEY:VALUE")]
     pub agent_cfg: Vec<String>,
+    /// The robots as Zenoh clients of this many `spwi-router` processes (next to the
+    /// agent binary) instead of a peer mesh (0).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u64).range(0..=4))]
+    pub routers: u64,
+    /// Kill the first router this long into the measurement (e.g. 10s; needs
+    /// --routers 2 or more): its robots move to the next router; reports how long
+    /// until all decide again.
+    #[arg(long, value_parser = crate::demo::parse_duration)]
+    pub router_down_at: Option<Duration>,
     /// A soak instead of a measurement: run this long (e.g. 30m) while robots leave,
     /// come back and freeze (see --churn); fails if the fleet did not stay up.
     #[arg(long, value_parser = crate::demo::parse_duration)]
@@ -218,6 +257,8 @@ pub fn main(a: BenchArgs) -> Result<()> {
         json,
         secured,
         agent_cfg,
+        routers,
+        router_down_at,
         soak,
         churn,
         freeze_every,
@@ -228,7 +269,10 @@ pub fn main(a: BenchArgs) -> Result<()> {
         Some(a) => a,
         None => std::env::current_exe()?.with_file_name("spwi-agent"),
     };
-    let fleet = FleetOptions { robots: robots as usize, agent, models, secured, agent_cfg };
+    if router_down_at.is_some() && routers < 2 {
+        anyhow::bail!("--router-down-at needs --routers 2 or more: with one router there is no other to move to");
+    }
+    let fleet = FleetOptions { robots: robots as usize, agent, models, secured, agent_cfg, routers: routers as usize };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     if let Some(duration) = soak {
         let opts = crate::soak::SoakOptions { fleet, duration, churn, freeze_every, scenario };
@@ -240,7 +284,7 @@ pub fn main(a: BenchArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let report = rt.block_on(run(&BenchOptions { fleet, duration, free_running: free, scenario }))?;
+    let report = rt.block_on(run(&BenchOptions { fleet, duration, free_running: free, scenario, router_down_at }))?;
     print(&report);
     write_json(json.as_deref(), &report)
 }

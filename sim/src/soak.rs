@@ -11,7 +11,9 @@
 //! - agreement: all of them named the same class at t.
 //!
 //! Resident memory and open files of the untouched agents are read at the start and
-//! at the end: a leak shows as growth.
+//! at the end: a leak shows as growth. Their resident memory is also sampled every
+//! minute, so a long run tells growth that levels off (warm-up, the allocator's
+//! arenas) from growth that does not (a leak).
 
 use crate::bench::LatencyMs;
 use crate::loopback::{layout_with_slots, FleetOptions, LoopbackFleet, Usage};
@@ -29,6 +31,8 @@ pub const FREEZE_FOR: Duration = Duration::from_secs(5);
 pub const SETTLE: Duration = Duration::from_secs(5);
 /// Warm-up before anything is measured.
 const WARMUP: Duration = Duration::from_secs(2);
+/// How often the untouched agents' resident memory is sampled.
+const RSS_EVERY: Duration = Duration::from_secs(60);
 
 pub struct SoakOptions {
     pub fleet: FleetOptions,
@@ -68,6 +72,9 @@ pub struct SoakReport {
     pub rss_mb_start: f64,
     pub rss_mb_end: f64,
     pub rss_growth_max: f64,
+    /// (seconds from the start of the measurement, mean resident MB of the untouched
+    /// agents), every minute and at the end.
+    pub rss_mb_along: Vec<(f64, f64)>,
     pub open_files_start: usize,
     pub open_files_end: usize,
 }
@@ -121,6 +128,8 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
     let mut events: Vec<(u64, Event)> = Vec::new();
     let (mut measure_from, mut at_start) = (None, Vec::new());
+    let (mut rss_mb_along, mut next_rss) = (Vec::new(), WARMUP);
+    let mean_rss = |usage: &[Usage]| mean(usage.iter().map(|u| u.rss_mb));
     let (mut next_churn, mut next_freeze) = (WARMUP + o.churn, WARMUP + o.freeze_every / 2 + o.churn / 2);
     let mut thaw_at: Option<Duration> = None;
     let ticks = (o.duration.as_secs_f64() / TICK_PERIOD.as_secs_f64()).round() as u64;
@@ -133,6 +142,10 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
         }
         if since >= WARMUP + o.duration {
             break;
+        }
+        if since >= next_rss {
+            rss_mb_along.push(((since - WARMUP).as_secs_f64(), mean_rss(&resources(&fleet))));
+            next_rss += RSS_EVERY;
         }
         if since >= next_churn {
             let event = if fleet.pid(churning).is_some() {
@@ -172,6 +185,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     let at_end = resources(&fleet);
     let (measured_since, first_tick) = measure_from.expect("measured after the warm-up");
     let seconds = measured_since.elapsed().as_secs_f64();
+    rss_mb_along.push((seconds, mean_rss(&at_end)));
     let (decisions, ids) = (std::mem::take(&mut *fleet.decisions.lock()), fleet.ids.clone());
     drop(fleet);
 
@@ -195,13 +209,14 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
         ghost_members: 0,
         agreement: 0.0,
         latency_ms: LatencyMs::of(&[]),
-        rss_mb_start: mean(at_start.iter().map(|u| u.rss_mb)),
-        rss_mb_end: mean(at_end.iter().map(|u| u.rss_mb)),
+        rss_mb_start: mean_rss(&at_start),
+        rss_mb_end: mean_rss(&at_end),
         rss_growth_max: at_start
             .iter()
             .zip(&at_end)
             .map(|(a, b)| if a.rss_mb > 0.0 { b.rss_mb / a.rss_mb - 1.0 } else { 0.0 })
             .fold(0.0, f64::max),
+        rss_mb_along,
         open_files_start: at_start.iter().map(|u| u.open_files).sum(),
         open_files_end: at_end.iter().map(|u| u.open_files).sum(),
     };
@@ -286,6 +301,8 @@ pub fn print(r: &SoakReport) {
         r.open_files_start,
         r.open_files_end
     );
+    let along: Vec<String> = r.rss_mb_along.iter().map(|(s, mb)| format!("{s:.0} s {mb:.1}")).collect();
+    println!("untouched agents' mean RSS along the run (MB): {}", along.join(", "));
     if !r.undecided_by_robot.is_empty() {
         println!("settled ticks not decided, by robot: {:?}; events (s): {:?}", r.undecided_by_robot, r.events);
     }

@@ -9,7 +9,7 @@ pub mod netns;
 use spwi_agent::model::{Backend, ModelSet};
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
-pub use spwi_sim::loopback::{secured_peer, AgentProcess, Decisions, Hub, InProcessAgent, Launch};
+pub use spwi_sim::loopback::{secured_peer, AgentProcess, Decisions, Hub, InProcessAgent, Launch, Routers};
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Arc, Mutex};

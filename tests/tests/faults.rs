@@ -1,7 +1,8 @@
 //! Faults, with agents as real processes where the fault is a process's: SIGKILL (the
 //! kernel closes its links: seen at once) and SIGSTOP (frozen, links stay open: seen
-//! only when its Zenoh lease runs out, ≈ 1 s), then SIGCONT (it comes back). Also bad
-//! input on every key and a second daemon with a taken robot id.
+//! only when its Zenoh lease runs out, ≈ 1 s), then SIGCONT (it comes back); robots
+//! that are Zenoh clients of two routers when one router is killed (its robots move to
+//! the other). Also bad input on every key and a second daemon with a taken robot id.
 //! Run: `cargo test -p spwi-tests --test faults -- --nocapture` to see the timings.
 
 use spwi_agent::config::AgentConfig;
@@ -12,6 +13,7 @@ use spwi_tests::*;
 use std::time::{Duration, Instant};
 
 const EXE: &str = env!("CARGO_BIN_EXE_spwi-test-agent");
+const ROUTER: &str = env!("CARGO_BIN_EXE_spwi-test-router");
 const TICK: Duration = Duration::from_millis(100);
 
 /// Three agent processes deciding; returns them once all count 3 members.
@@ -166,5 +168,52 @@ async fn a_second_daemon_with_a_taken_robot_id_is_refused() {
         let status = second.wait_exit(Duration::from_secs(20)).await.unwrap();
         assert!(!status.success(), "a daemon with a taken robot id must refuse to start");
         a.stop().await.unwrap();
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn clients_of_a_router_that_dies_move_to_the_other_and_the_fleet_decides_on() {
+    let _serial = serial().await;
+    within!(90, "test", async {
+        let mut routers = Routers::start(std::path::Path::new(ROUTER), 2).unwrap();
+        // The detections come through router 1 (on a robot its camera is local).
+        let hub = Hub::start_client("routed", &routers.connect_from(1)).await.unwrap();
+        let collector = hub.decisions().await.unwrap();
+        let ids: Vec<_> = (0..4).map(|i| id(&format!("c{i}"))).collect();
+        let _agents: Vec<_> = ids
+            .iter()
+            .enumerate()
+            .map(|(k, r)| {
+                let launch =
+                    Launch { routers: routers.connect_from(k % 2), models: Some(models_dir()), ..Launch::new(&hub, r) };
+                AgentProcess::spawn(std::process::Command::new(EXE), launch).unwrap()
+            })
+            .collect();
+        let publisher = Publisher::start(&hub, ids.clone(), TICK);
+        collector.wait_members(&ids, 4, Instant::now(), Duration::from_secs(20)).await.unwrap();
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        let tick0 = publisher.current_tick();
+        let (agreed, common) = collector.agreement(&ids, tick0 - 15, tick0 - 1);
+        assert!(
+            common >= 14 && agreed >= 0.99,
+            "through routers: {common} of 15 ticks decided by all, {agreed} agreed"
+        );
+
+        routers.kill(0).unwrap();
+        let killed = Instant::now();
+        let at_home_on_0 = [ids[0].clone(), ids[2].clone()];
+        // A decision published after the kill reaches the observer only through router 1.
+        let took = collector
+            .wait_members(&at_home_on_0, 4, killed + Duration::from_millis(100), Duration::from_secs(10))
+            .await
+            .unwrap();
+        eprintln!("router 0 killed: its robots decide through router 1 after {took:?}");
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        let tick1 = publisher.current_tick();
+        for r in [&ids[1], &ids[3]] {
+            assert!(collector.longest_gap(r, tick0, tick1 - 1) <= 2, "{r}, at home on router 1, stopped deciding");
+        }
+        let (agreed, common) = collector.agreement(&ids, tick1 - 10, tick1 - 1);
+        assert!(common >= 9 && agreed >= 0.99, "after the move: {common} of 10 ticks decided by all, {agreed} agreed");
     });
 }

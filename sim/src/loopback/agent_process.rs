@@ -13,8 +13,11 @@ use std::time::{Duration, Instant};
 pub struct Launch<'a> {
     pub hub: &'a Hub,
     pub robot: &'a RobotId,
-    /// The Zenoh endpoint it listens on.
+    /// The Zenoh endpoint it listens on as a peer of the hub's mesh.
     pub listen: String,
+    /// Routers to join as a Zenoh client instead, its home router first (see
+    /// `Routers::connect_from`); empty: a peer of the mesh.
+    pub routers: Vec<String>,
     /// Its model set (default: the daemon's own).
     pub models: Option<PathBuf>,
     /// Zenoh settings (`KEY:VALUE`) after the fleet's own.
@@ -26,7 +29,15 @@ pub struct Launch<'a> {
 impl<'a> Launch<'a> {
     /// `robot` on loopback, an ephemeral port, its default models, warnings shown.
     pub fn new(hub: &'a Hub, robot: &'a RobotId) -> Launch<'a> {
-        Launch { hub, robot, listen: "tcp/127.0.0.1:0".into(), models: None, cfg: &[], stderr: true }
+        Launch {
+            hub,
+            robot,
+            listen: "tcp/127.0.0.1:0".into(),
+            routers: Vec::new(),
+            models: None,
+            cfg: &[],
+            stderr: true,
+        }
     }
 }
 
@@ -40,11 +51,17 @@ impl AgentProcess {
     /// by executing it, as `ip netns exec` does) with `launch`'s arguments.
     pub fn spawn(mut command: Command, launch: Launch) -> Result<AgentProcess> {
         let hub = launch.hub;
+        command.args(["--robot-id", launch.robot.as_str(), "--fleet", hub.fleet.as_str()]);
+        if launch.routers.is_empty() {
+            command
+                .args(["--cfg", r#"mode:"peer""#])
+                .args(["--cfg", &format!(r#"listen/endpoints:["{}"]"#, launch.listen)])
+                .args(["--cfg", &format!(r#"connect/endpoints:["{}"]"#, hub.locator)]);
+        } else {
+            let routers = serde_json::to_string(&launch.routers)?;
+            command.args(["--cfg", r#"mode:"client""#]).args(["--cfg", &format!("connect/endpoints:{routers}")]);
+        }
         command
-            .args(["--robot-id", launch.robot.as_str(), "--fleet", hub.fleet.as_str()])
-            .args(["--cfg", r#"mode:"peer""#])
-            .args(["--cfg", &format!(r#"listen/endpoints:["{}"]"#, launch.listen)])
-            .args(["--cfg", &format!(r#"connect/endpoints:["{}"]"#, hub.locator)])
             .args(["--cfg", "scouting/multicast/enabled:false"])
             .args(launch.cfg.iter().flat_map(|c| ["--cfg", c.as_str()]))
             .env("RUST_LOG", "warn,zenoh=error")

@@ -1,10 +1,11 @@
 //! A fleet of real `spwi-agent` processes on one machine, for `spwi-sim bench` and its
 //! soak: the simulated world's session is the hub every agent connects to (gossip
-//! completes the mesh), and it observes what the agents publish (decisions, message and
+//! completes the mesh) — or, with routers, every agent and the hub are Zenoh clients of
+//! `spwi-router` processes — and the hub observes what the agents publish (decisions, message and
 //! byte counts) and who holds a liveliness token. Agents can be stopped, started again
 //! and frozen; their CPU, memory and open files are read from /proc.
 
-use super::{AgentProcess, Decisions, Hub, Launch};
+use super::{AgentProcess, Decisions, Hub, Launch, Routers};
 use anyhow::{anyhow, bail, Context, Result};
 use spwi_agent::fleet::authority::ThrowawayFleet;
 use spwi_proto::keys::{self, Topic};
@@ -28,6 +29,9 @@ pub struct FleetOptions {
     pub secured: bool,
     /// Zenoh settings (`KEY:VALUE`) passed to every agent after the fleet's own.
     pub agent_cfg: Vec<String>,
+    /// 0: the agents form a peer mesh. N: they are Zenoh clients of N `spwi-router`
+    /// processes (from the binary next to `agent`), robot k at home on router k mod N.
+    pub routers: usize,
 }
 
 /// What the hub counts of the agents' traffic besides their decisions.
@@ -53,6 +57,8 @@ pub struct LoopbackFleet {
     detection_keys: Vec<String>,
     _traffic: zenoh::pubsub::Subscriber<()>,
     _members: zenoh::pubsub::Subscriber<()>,
+    /// Last, so they outlive the agents (fields drop in order).
+    routers: Option<Routers>,
 }
 
 impl LoopbackFleet {
@@ -66,7 +72,18 @@ impl LoopbackFleet {
         }
         let fleet = format!("bench{}", std::process::id());
         let ids: Vec<RobotId> = (0..options.robots).map(|i| RobotId::new(format!("b{i}"))).collect::<Result<_, _>>()?;
-        let (hub, secured) = if options.secured {
+        let routers = match options.routers {
+            0 => None,
+            n => Some(Routers::start(&options.agent.with_file_name("spwi-router"), n)?),
+        };
+        let (hub, secured) = if let Some(r) = &routers {
+            if options.secured {
+                bail!("a secured fleet of routers' clients is not supported yet: leave out --secured or --routers");
+            }
+            // At home on the last router: the simulated cameras' link is not the one
+            // a router failure (`kill_router(0)`) cuts — on a robot its camera is local.
+            (Hub::start_client(&fleet, &r.connect_from(r.endpoints.len() - 1)).await?, None)
+        } else if options.secured {
             let secured = ThrowawayFleet::with_world("bench", &FleetId::new(&fleet)?, &ids)?;
             (Hub::start_secured(&secured.dir.root, "world").await?, Some(secured))
         } else {
@@ -121,6 +138,7 @@ impl LoopbackFleet {
             detection_keys,
             _traffic: counted,
             _members: members,
+            routers,
         };
         for slot in 0..f.ids.len() {
             f.start_agent(slot)?;
@@ -134,6 +152,7 @@ impl LoopbackFleet {
     pub fn start_agent(&mut self, slot: usize) -> Result<()> {
         assert!(self.agents[slot].is_none(), "agent {slot} is running");
         let launch = Launch {
+            routers: self.routers.as_ref().map(|r| r.connect_from(slot % r.endpoints.len())).unwrap_or_default(),
             models: self.options.models.clone(),
             cfg: &self.options.agent_cfg,
             stderr: false,
@@ -149,6 +168,11 @@ impl LoopbackFleet {
         let agent = self.agents[slot].take().with_context(|| format!("agent {slot} is not running"))?;
         agent.stop().await?;
         Ok(())
+    }
+
+    /// Kills router `i` (SIGKILL); its clients move to the next router they list.
+    pub fn kill_router(&mut self, i: usize) -> Result<()> {
+        self.routers.as_mut().context("this fleet has no routers")?.kill(i)
     }
 
     /// Sends `sig` (e.g. "STOP", "CONT") to the running agent of `slot`.

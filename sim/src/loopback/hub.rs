@@ -1,6 +1,7 @@
 //! The hub: the observer's own Zenoh session, listening on an ephemeral port, which
 //! every agent of the fleet connects to. On a secured fleet it presents a member's
-//! certificate (the world's: it publishes the detections).
+//! certificate (the world's: it publishes the detections). In a fleet of routers'
+//! clients it is a client of a router too.
 
 use super::Decisions;
 use anyhow::{anyhow, Context, Result};
@@ -12,7 +13,7 @@ use std::sync::Arc;
 
 pub struct Hub {
     pub session: zenoh::Session,
-    /// Where it listens: what agents connect to.
+    /// What agents connect to: where it listens, or its router when it is a client.
     pub locator: String,
     pub fleet: FleetId,
     /// The fleet directory when the fleet is secured.
@@ -30,6 +31,22 @@ impl Hub {
         let mut config = zenoh_config::loopback_peer(&[])?;
         config.insert_json5("listen/endpoints", &serde_json::to_string(&[endpoint])?).map_err(|e| anyhow!(e))?;
         Self::open(config, FleetId::new(fleet)?, None).await
+    }
+
+    /// An open hub of fleet `fleet` as a Zenoh client of `routers` (the first it
+    /// reaches; see `Routers::connect_from`).
+    pub async fn start_client(fleet: &str, routers: &[String]) -> Result<Hub> {
+        let mut config = zenoh_config::build(None, &[])?;
+        for (key, value) in [
+            ("mode", r#""client""#.to_owned()),
+            ("connect/endpoints", serde_json::to_string(routers)?),
+            ("scouting/multicast/enabled", "false".to_owned()),
+        ] {
+            config.insert_json5(key, &value).map_err(|e| anyhow!("{key}: {e}"))?;
+        }
+        let session = zenoh::open(config).await.map_err(|e| anyhow!("the hub's zenoh session: {e}"))?;
+        let locator = routers.first().context("a client hub needs a router")?.clone();
+        Ok(Hub { session, locator, fleet: FleetId::new(fleet)?, fleet_dir: None })
     }
 
     /// A hub of the secured fleet in `dir`, presenting the certificate of `identity`.

@@ -7,19 +7,23 @@
 //! in_process.rs    the daemon's code in this process, with a Zenoh session of its own
 //! decisions.rs     every decision the agents publish, by tick and robot: agreement, gaps
 //! fleet.rs         N agent processes around a hub, started, stopped and frozen by slot
+//! routers.rs       `spwi-router` processes, for a fleet of routers' clients
 //! ```
 //!
 //! Multicast scouting is off everywhere: agents connect to the hub and gossip
-//! completes the mesh, so concurrent fleets on one machine never meet.
+//! completes the mesh (or they are clients of the fleet's own routers), so concurrent
+//! fleets on one machine never meet.
 
 mod agent_process;
 mod decisions;
 mod fleet;
 mod hub;
 mod in_process;
+mod routers;
 
 pub use agent_process::{AgentProcess, Launch};
 pub use decisions::{percentile, Decided, Decisions};
 pub use fleet::{layout_with_slots, usage, FleetOptions, LoopbackFleet, Usage};
 pub use hub::{secured_peer, Hub};
 pub use in_process::InProcessAgent;
+pub use routers::Routers;
