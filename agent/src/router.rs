@@ -42,7 +42,7 @@ async fn run(args: Args) -> Result<()> {
     let mut overrides =
         vec![r#"mode:"router""#.to_owned(), format!("listen/endpoints:{}", serde_json::to_string(&[&args.listen])?)];
     overrides.extend(args.cfg);
-    let mut config = crate::zenoh_config::build(args.zenoh_config.as_deref(), &overrides)?;
+    let mut config = crate::zenoh_config::build_router(args.zenoh_config.as_deref(), &overrides)?;
     crate::fleet::secure_or_warn(&mut config, args.fleet_dir.as_deref(), &args.identity, Role::Router, "spwi-router")?;
     let session = zenoh::open(config).await.map_err(|e| anyhow!("cannot start the Zenoh router: {e}"))?;
     tracing::info!(listen = %args.listen, zid = %session.zid(), "router up");

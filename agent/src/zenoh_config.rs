@@ -15,6 +15,14 @@
 //! (8 agents, two CPU hogs beside them): 57 and 75 of 950 settled ticks missing a
 //! decision with 2 batches, 0 and 0 with 8 (docs/BENCHMARKS.md, "Soak").
 //!
+//! A router carries every client's burst on each of its links: with 16 robots as its
+//! clients, a tick puts some fifty express messages on every outgoing link at once. So
+//! [`build_router`] gives its links Zenoh's largest data queue ([`ROUTER_DATA_QUEUE_BATCHES`])
+//! and lets a message wait up to [`ROUTER_WAIT_BEFORE_DROP_US`] for a free batch instead of
+//! 1 ms: 16 robots as clients of one router on a busy 2-core host lost a robot's
+//! decision on 87–157 of 200 ticks with the agents' settings, and on none with these
+//! (docs/BENCHMARKS.md, "Peer mesh or routers").
+//!
 //! A file given by the user is taken as is; set `transport/link/tx/lease` and the
 //! queue size in it.
 
@@ -28,10 +36,37 @@ pub const KEEP_ALIVE: u64 = 4;
 /// Batches in each link's queue for data-priority messages (Zenoh allows 1–16).
 pub const DATA_QUEUE_BATCHES: u64 = 8;
 
+/// Batches in each of a router's link queues for data-priority messages (Zenoh's most).
+pub const ROUTER_DATA_QUEUE_BATCHES: u64 = 16;
+/// How long a router's droppable message waits for a free batch (µs; Zenoh's: 1000).
+/// Well within the tick's 60 ms decision deadline.
+pub const ROUTER_WAIT_BEFORE_DROP_US: u64 = 10_000;
+
 /// Builds the Zenoh config from an optional json5 file and `KEY:VALUE` overrides
 /// (VALUE is json5, e.g. `mode:"peer"` or `listen/endpoints:["tcp/0.0.0.0:7447"]`).
 pub fn build(file: Option<&Path>, overrides: &[String]) -> Result<zenoh::Config> {
-    let mut c = match file {
+    let mut c = from_file_or_defaults(file)?;
+    apply(&mut c, overrides)?;
+    Ok(c)
+}
+
+/// [`build`] for `spwi-router`: without a file, its links also get the deeper queues.
+pub fn build_router(file: Option<&Path>, overrides: &[String]) -> Result<zenoh::Config> {
+    let mut c = from_file_or_defaults(file)?;
+    if file.is_none() {
+        set(&mut c, "transport/link/tx/queue/size/data", &ROUTER_DATA_QUEUE_BATCHES.to_string())?;
+        set(
+            &mut c,
+            "transport/link/tx/queue/congestion_control/drop/wait_before_drop",
+            &ROUTER_WAIT_BEFORE_DROP_US.to_string(),
+        )?;
+    }
+    apply(&mut c, overrides)?;
+    Ok(c)
+}
+
+fn from_file_or_defaults(file: Option<&Path>) -> Result<zenoh::Config> {
+    Ok(match file {
         Some(p) => zenoh::Config::from_file(p).map_err(|e| anyhow!("zenoh config {}: {e}", p.display()))?,
         None => {
             let mut c = zenoh::Config::default();
@@ -40,14 +75,17 @@ pub fn build(file: Option<&Path>, overrides: &[String]) -> Result<zenoh::Config>
             set(&mut c, "transport/link/tx/queue/size/data", &DATA_QUEUE_BATCHES.to_string())?;
             c
         }
-    };
+    })
+}
+
+fn apply(c: &mut zenoh::Config, overrides: &[String]) -> Result<()> {
     for o in overrides {
         let Some((key, value)) = o.split_once(':') else {
             bail!("--cfg {o:?}: expected KEY:VALUE, e.g. mode:\"peer\"");
         };
-        set(&mut c, key, value)?;
+        set(c, key, value)?;
     }
-    Ok(c)
+    Ok(())
 }
 
 fn set(c: &mut zenoh::Config, key: &str, value: &str) -> Result<()> {
@@ -68,6 +106,22 @@ pub fn loopback_peer(connect: &[String]) -> Result<zenoh::Config> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_router_gets_deeper_queues_unless_its_file_or_an_override_says_otherwise() {
+        let c = build_router(None, &[]).unwrap();
+        assert_eq!(c.get_json("transport/link/tx/lease").unwrap(), "1000");
+        assert_eq!(c.get_json("transport/link/tx/queue/size/data").unwrap(), "16");
+        let wait = c.get_json("transport/link/tx/queue/congestion_control/drop/wait_before_drop").unwrap();
+        assert_eq!(wait, "10000");
+        let c = build_router(None, &["transport/link/tx/queue/size/data:4".to_owned()]).unwrap();
+        assert_eq!(c.get_json("transport/link/tx/queue/size/data").unwrap(), "4");
+        let file = std::env::temp_dir().join(format!("spwi-router-{}.json5", std::process::id()));
+        std::fs::write(&file, "{ mode: \"router\" }").unwrap();
+        let c = build_router(Some(&file), &[]).unwrap();
+        std::fs::remove_file(&file).unwrap();
+        assert_eq!(c.get_json("transport/link/tx/queue/size/data").unwrap(), "2", "a user's file is taken as is");
+    }
 
     #[test]
     fn defaults_carry_the_short_lease_and_overrides_apply() {

@@ -71,6 +71,9 @@ pub struct BenchReport {
     pub router_down_gap_s: Option<f64>,
     /// Fraction of one core, mean over agents.
     pub cpu_per_agent: f64,
+    /// Fraction of one core, all routers together; none without routers or when one
+    /// was killed during the run.
+    pub cpu_routers: Option<f64>,
     pub rss_mb_per_agent: f64,
     pub msgs_per_tick_per_robot: f64,
     pub bytes_per_tick_per_robot: f64,
@@ -82,7 +85,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let mut world = World::new(layout_with_slots(robots), o.scenario, 1, robots);
     let warmup = Duration::from_secs(2);
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
-    let (mut cpu0, mut measure_from) = (Vec::new(), None);
+    let (mut cpu0, mut routers_cpu0, mut measure_from) = (Vec::new(), 0.0, None);
     let mut router_down_tick = None;
     let started = Instant::now();
     let mut next = Instant::now();
@@ -90,6 +93,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         let now = Instant::now();
         if measure_from.is_none() && now - started >= warmup {
             cpu0 = (0..robots).map(|slot| fleet.usage(slot).cpu_s).collect();
+            routers_cpu0 = fleet.routers_cpu_s();
             let mut traffic = fleet.traffic.lock().expect("traffic");
             (traffic.messages, traffic.bytes) = (0, 0);
             measure_from = Some((now, world.tick + 1));
@@ -120,6 +124,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let elapsed = measured_since.elapsed().as_secs_f64();
     tokio::time::sleep(Duration::from_millis(300)).await; // the last decisions
     let usage: Vec<Usage> = (0..robots).map(|slot| fleet.usage(slot)).collect();
+    let routers_cpu = fleet.routers_cpu_s();
     let decisions = std::mem::take(&mut *fleet.decisions.lock());
     let (messages, bytes) = {
         let traffic = fleet.traffic.lock().expect("traffic");
@@ -160,6 +165,8 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
             gap_ticks as f64 * spwi_proto::TICK_PERIOD.as_secs_f64()
         }),
         cpu_per_agent: usage.iter().zip(&cpu0).map(|(u, c0)| (u.cpu_s - c0) / elapsed).sum::<f64>() / n,
+        cpu_routers: (o.fleet.routers > 0 && router_down_tick.is_none())
+            .then(|| (routers_cpu - routers_cpu0) / elapsed),
         rss_mb_per_agent: usage.iter().map(|u| u.rss_mb).sum::<f64>() / n,
         msgs_per_tick_per_robot: messages as f64 / ticks as f64 / n,
         bytes_per_tick_per_robot: bytes as f64 / ticks as f64 / n,
@@ -188,6 +195,9 @@ pub fn print(r: &BenchReport) {
         r.msgs_per_tick_per_robot,
         r.bytes_per_tick_per_robot
     );
+    if let Some(cpu) = r.cpu_routers {
+        println!("routers: {:.1} % of a core together", 100.0 * cpu);
+    }
     if let Some(gap) = r.router_down_gap_s {
         println!("router 0 killed: every robot deciding again {gap:.1} s after");
     }

@@ -170,6 +170,11 @@ impl LoopbackFleet {
         Ok(())
     }
 
+    /// CPU seconds the fleet's running routers have used (0 without routers).
+    pub fn routers_cpu_s(&self) -> f64 {
+        self.routers.as_ref().map_or(0.0, Routers::cpu_s)
+    }
+
     /// Kills router `i` (SIGKILL); its clients move to the next router they list.
     pub fn kill_router(&mut self, i: usize) -> Result<()> {
         self.routers.as_mut().context("this fleet has no routers")?.kill(i)

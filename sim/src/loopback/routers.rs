@@ -56,6 +56,11 @@ impl Routers {
         (0..n).map(|k| self.endpoints[(home + k) % n].clone()).collect()
     }
 
+    /// CPU seconds (user and system) the routers still running have used.
+    pub fn cpu_s(&self) -> f64 {
+        self.processes.iter().flatten().filter_map(|c| super::usage(c.id())).map(|u| u.cpu_s).sum()
+    }
+
     /// Kills router `i` at once (SIGKILL: a crash or a power cut, no goodbye).
     pub fn kill(&mut self, i: usize) -> Result<()> {
         let mut child = self.processes[i].take().with_context(|| format!("router {i} is not running"))?;
