@@ -1,9 +1,10 @@
 //! A fleet of real `spwi-agent` processes on one machine, for `spwi-sim bench` and its
 //! soak: the simulated world's session is the hub every agent connects to (gossip
-//! completes the mesh) — or, with routers, every agent and the hub are Zenoh clients of
-//! `spwi-router` processes — and the hub observes what the agents publish (decisions, message and
-//! byte counts) and who holds a liveliness token. Agents can be stopped, started again
-//! and frozen; their CPU, memory and open files are read from /proc.
+//! completes the mesh) — or, with routers, every agent and the hub are Zenoh clients
+//! of `spwi-router` processes — and the hub observes what the agents publish
+//! (decisions, message and byte counts) and who holds a liveliness token. Agents can be
+//! stopped, started again and frozen; their CPU, memory and open files are read from
+//! /proc.
 
 use super::{AgentProcess, Decisions, Hub, Launch, Routers};
 use anyhow::{anyhow, bail, Context, Result};

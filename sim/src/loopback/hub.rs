@@ -36,16 +36,16 @@ impl Hub {
     /// An open hub of fleet `fleet` as a Zenoh client of `routers` (the first it
     /// reaches; see `Routers::connect_from`).
     pub async fn start_client(fleet: &str, routers: &[String]) -> Result<Hub> {
-        let mut config = zenoh_config::build(None, &[])?;
-        for (key, value) in [
-            ("mode", r#""client""#.to_owned()),
-            ("connect/endpoints", serde_json::to_string(routers)?),
-            ("scouting/multicast/enabled", "false".to_owned()),
-        ] {
-            config.insert_json5(key, &value).map_err(|e| anyhow!("{key}: {e}"))?;
-        }
-        let session = zenoh::open(config).await.map_err(|e| anyhow!("the hub's zenoh session: {e}"))?;
         let locator = routers.first().context("a client hub needs a router")?.clone();
+        let config = zenoh_config::build(
+            None,
+            &[
+                r#"mode:"client""#.to_owned(),
+                format!("connect/endpoints:{}", serde_json::to_string(routers)?),
+                "scouting/multicast/enabled:false".to_owned(),
+            ],
+        )?;
+        let session = zenoh::open(config).await.map_err(|e| anyhow!("the hub's zenoh session: {e}"))?;
         Ok(Hub { session, locator, fleet: FleetId::new(fleet)?, fleet_dir: None })
     }
 

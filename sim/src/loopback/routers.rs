@@ -4,8 +4,9 @@
 //! client a robot has one link and sends each message once, and the router fans it
 //! out. Each router listens on a free loopback port and connects to every router
 //! started before it, so the routers form a full mesh: a client of any of them reaches
-//! every robot, and no single router's death splits the others. A client lists its home router first and the others
-//! after it, so when its router goes down it connects to the next.
+//! every robot, and no single router's death splits the others. A client lists its
+//! home router first and the others after it, so when its router goes down it
+//! connects to the next.
 
 use anyhow::{bail, Context, Result};
 use std::net::{TcpListener, TcpStream};
