@@ -219,8 +219,24 @@ fn first_difference<T: PartialEq>(what: &str, replayed: &[T], recorded: &[T]) ->
     )
 }
 
+/// Zenoh's transport tasks (rx, tx, accept, net), which by default run on runtimes of
+/// their own (five threads), moved onto its one-thread app runtime: an agent's traffic is
+/// a few messages per peer per tick, and waking a thread per message cost more than the
+/// messages (docs/BENCHMARKS.md, "Zenoh's runtimes"). Only the agent's: the router,
+/// which carries every robot's traffic, keeps Zenoh's own. `ZENOH_RUNTIME` in the
+/// environment replaces it.
+pub const ZENOH_RUNTIME_OF_AN_AGENT: &str =
+    "(rx: (handover: app), tx: (handover: app), acc: (handover: app), net: (handover: app))";
+
+/// The variable Zenoh reads its runtimes from (zenoh-runtime's `ZENOH_RUNTIME_ENV`).
+const ZENOH_RUNTIME_ENV: &str = "ZENOH_RUNTIME";
+
 /// `main` of `spwi-agent`.
 pub fn main() -> ExitCode {
+    if std::env::var_os(ZENOH_RUNTIME_ENV).is_none() {
+        // Before any thread exists, and before Zenoh first reads it.
+        std::env::set_var(ZENOH_RUNTIME_ENV, ZENOH_RUNTIME_OF_AN_AGENT);
+    }
     let mut args = Args::parse();
     if let Some(Command::Fleet(cmd)) = args.command.take() {
         init_tracing(LogFormat::Human);

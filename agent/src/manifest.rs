@@ -199,10 +199,12 @@ fn is_paper(r: &RowLayout) -> bool {
 /// A model set that does not fit the daemon or its own ONNX files.
 #[derive(Debug, thiserror::Error)]
 pub enum ManifestError {
-    #[error("cannot read model manifest {path}: {source}")]
-    Read { path: PathBuf, source: std::io::Error },
-    #[error("model manifest {path} is not valid: {source}")]
-    Parse { path: PathBuf, source: serde_json::Error },
+    // The cause is in the message, so it is not also the error's `source`: a chain
+    // printed with `{:#}` would name it twice.
+    #[error("cannot read model manifest {path}: {cause}")]
+    Read { path: PathBuf, cause: std::io::Error },
+    #[error("model manifest {path} is not valid: {cause}")]
+    Parse { path: PathBuf, cause: serde_json::Error },
     #[error("model manifest {path}: {problem}")]
     Invalid { path: PathBuf, problem: String },
     #[error("{file}: cannot load ONNX model: {reason}")]
@@ -220,10 +222,9 @@ impl Manifest {
     /// and checks every ONNX file against it.
     pub fn load(dir: &Path) -> Result<Manifest, ManifestError> {
         let path = dir.join("manifest.json");
-        let text =
-            std::fs::read_to_string(&path).map_err(|source| ManifestError::Read { path: path.clone(), source })?;
+        let text = std::fs::read_to_string(&path).map_err(|cause| ManifestError::Read { path: path.clone(), cause })?;
         let m: Manifest =
-            serde_json::from_str(&text).map_err(|source| ManifestError::Parse { path: path.clone(), source })?;
+            serde_json::from_str(&text).map_err(|cause| ManifestError::Parse { path: path.clone(), cause })?;
         m.check_interface(&path)?;
         for (_, spec) in m.models.all() {
             check_onnx(&dir.join(&spec.file), spec)?;

@@ -181,6 +181,18 @@ fn a_wrong_model_file_is_refused() {
 }
 
 #[test]
+fn a_set_without_a_manifest_is_refused_naming_the_file_and_the_cause_once() {
+    let dir = fixture_copy("no-manifest");
+    std::fs::remove_file(dir.join("manifest.json")).unwrap();
+    // `{:#}` is how the daemon prints a failed start: the whole chain.
+    let e = format!("{:#}", ModelSet::load(&dir, Backend::Tract, None).unwrap_err());
+    let not_found = std::fs::read_to_string(dir.join("manifest.json")).unwrap_err().to_string();
+    assert!(e.contains("manifest.json") && e.contains(&not_found), "{e}");
+    assert_eq!(e.matches(&not_found).count(), 1, "the cause is said once: {e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn a_manifest_inconsistent_with_the_daemon_is_refused() {
     let dir = fixture_copy("window");
     let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();

@@ -74,8 +74,8 @@ pub enum DecodeError {
     Malformed { kind: &'static str, reason: String },
     #[error("{kind}: {extra} trailing bytes after the message")]
     TrailingBytes { kind: &'static str, extra: usize },
-    #[error("{kind}: {source}")]
-    Invalid { kind: &'static str, source: Invalid },
+    #[error("{kind}: {cause}")]
+    Invalid { kind: &'static str, cause: Invalid },
     #[error("{kind}: published on robot {key:?}'s key but claims to be from {payload:?}")]
     RobotMismatch { kind: &'static str, key: RobotId, payload: RobotId },
 }
@@ -102,7 +102,7 @@ pub fn decode<M: Message>(bytes: &[u8]) -> Result<M, DecodeError> {
     if n + m != bytes.len() {
         return Err(DecodeError::TrailingBytes { kind, extra: bytes.len() - n - m });
     }
-    msg.validate().map_err(|source| DecodeError::Invalid { kind, source })?;
+    msg.validate().map_err(|cause| DecodeError::Invalid { kind, cause })?;
     Ok(msg)
 }
 

@@ -175,6 +175,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         faults: crate::eval::Faults { dropouts, loss, faulty, looping, delay_ms: delay },
         tick,
         warm_map_ticks: warm_map * 10,
+        cnn1d: true,
     })?;
     crate::eval::print(&report);
     if let Some(path) = json {

@@ -221,7 +221,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     }
     let ids: Vec<RobotId> = engines.iter().map(|e| e.config().robot.clone()).collect();
     let mut observers = (0..n)
-        .map(|_| Observers::new(&o.models, crate::calibration::of(&layout.camera)))
+        .map(|_| Observers::new(&o.models, crate::calibration::of(&layout.camera), o.cnn1d))
         .collect::<Result<Vec<_>>>()?;
     let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
     let mut stuck: Vec<StuckCamera> = (0..n).map(|_| StuckCamera::default()).collect();

@@ -96,6 +96,9 @@ pub struct EvalOptions {
     /// Ticks the fleet worked on the floor before each episode, building its station
     /// maps (0: they start empty). See `team_floor`.
     pub warm_map_ticks: u32,
+    /// Score the 1D-CNN baseline too (when the set ships one). `--all` asks for it only
+    /// in the tables that show it: elsewhere it was a quarter of the run's time.
+    pub cnn1d: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -239,7 +242,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     models.insert("cvm", of(&|e| &e.cvm));
     models.insert("cvm_mapped", of(&|e| &e.cvm_mapped));
     models.insert("collective_goal_unmapped", of(&|e| &e.collective_goal_unmapped));
-    if m.models.cnn1d.is_some() {
+    if o.cnn1d && m.models.cnn1d.is_some() {
         models.insert("cnn1d", of(&|e| &e.cnn1d));
     }
     let mut close_pair = BTreeMap::new();
@@ -462,6 +465,7 @@ mod tests {
             faults,
             tick: TickConfig::default(),
             warm_map_ticks: 0,
+            cnn1d: true,
         }
     }
 
@@ -485,6 +489,19 @@ mod tests {
             assert!((0.0..=1.0).contains(&acc.t), "{key}: {acc:?}");
         }
         assert_eq!(a.per_robot.len(), 3);
+    }
+
+    #[test]
+    fn the_1d_cnn_baseline_is_scored_when_asked_and_changes_no_other_figure() {
+        // The default set ships the baseline (the fixture does not).
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
+        let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
+        let with = run(&EvalOptions { episodes: 1, ..options(set.clone(), Faults::none()) }).unwrap();
+        let without = run(&EvalOptions { episodes: 1, cnn1d: false, ..options(set, Faults::none()) }).unwrap();
+        assert!(with.models.contains_key("cnn1d") && !without.models.contains_key("cnn1d"));
+        let mut with = without_timings(&with);
+        with["models"].as_object_mut().unwrap().remove("cnn1d");
+        assert_eq!(with, without_timings(&without));
     }
 
     #[test]

@@ -65,13 +65,14 @@ fn classes(logits: &[[f32; NUM_CLASSES]]) -> Vec<Station> {
 }
 
 impl Observers {
-    pub fn new(models: &Arc<ModelSet>, camera: CameraCalibration) -> Result<Self> {
+    /// The observers of one robot; the 1D-CNN only if `cnn1d` and the set ships one.
+    pub fn new(models: &Arc<ModelSet>, camera: CameraCalibration, cnn1d: bool) -> Result<Self> {
         let m = &models.manifest;
         Ok(Observers {
             graph: GraphBuilder::new(m.max_nodes, m.edge_weight),
             ego: models.inference(TemporalModel::Ego)?,
             ego_rows: Window::with_frames(m.window, m.frames(), m.row),
-            cnn1d: m.models.cnn1d.is_some().then(|| models.runner(ModelKind::Cnn1d)).transpose()?,
+            cnn1d: (cnn1d && m.models.cnn1d.is_some()).then(|| models.runner(ModelKind::Cnn1d)).transpose()?,
             cnn_rows: BTreeMap::new(),
             cvm: Cvm::new(spwi_proto::TICK_PERIOD.as_secs_f32()),
             camera,

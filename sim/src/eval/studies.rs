@@ -122,12 +122,14 @@ fn set_names(reports: &[Report]) -> String {
 
 pub fn run_all(s: &Settings) -> Result<Studies> {
     let default = load(&s.models_root, 20, 20, None)?;
+    // The 1D-CNN baseline runs only where a table shows it (Table II, the unseen floors).
     let one_with = |scenario: u8,
                     robots: usize,
                     models: &std::sync::Arc<ModelSet>,
                     seed: u64,
                     faults: Faults,
-                    tick: TickConfig|
+                    tick: TickConfig,
+                    cnn1d: bool|
      -> Result<Report> {
         let r = run(&EvalOptions {
             scenario: Scenario::from_number(scenario)?,
@@ -141,13 +143,14 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
             faults,
             tick,
             warm_map_ticks: 0,
+            cnn1d,
         })?;
         super::print(&r);
         println!();
         Ok(r)
     };
     let one = |scenario: u8, robots: usize, models: &std::sync::Arc<ModelSet>, seed: u64, faults: Faults| {
-        one_with(scenario, robots, models, seed, faults, TickConfig::default())
+        one_with(scenario, robots, models, seed, faults, TickConfig::default(), false)
     };
     let mut st = Studies {
         scenarios: Vec::new(),
@@ -160,7 +163,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         warm_maps: Vec::new(),
     };
     for scenario in 1..=3 {
-        st.scenarios.push(one(scenario, 3, &default, s.seed, Faults::none())?);
+        st.scenarios.push(one_with(scenario, 3, &default, s.seed, Faults::none(), TickConfig::default(), true)?);
     }
     for robots in [1, 2, 3, 4, 6, 8] {
         st.robots.push(one(3, robots, &default, s.seed, Faults::none())?);
@@ -186,10 +189,10 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
     ] {
         // The paper's protocol (no relays, no check for frozen feeds, the paper's rule)
         // beside ours with each consensus rule.
-        st.faults.push(one_with(3, 4, &default, s.seed, faults.clone(), paper_protocol())?);
+        st.faults.push(one_with(3, 4, &default, s.seed, faults.clone(), paper_protocol(), false)?);
         for consensus in [ConsensusRule::Paper, ConsensusRule::Trust] {
             let ours = TickConfig { consensus, ..TickConfig::default() };
-            st.faults.push(one_with(3, 4, &default, s.seed, faults.clone(), ours)?);
+            st.faults.push(one_with(3, 4, &default, s.seed, faults.clone(), ours, false)?);
         }
     }
     if let Some(r) = st.scenarios.iter().find(|r| r.scenario == 3) {
@@ -210,36 +213,40 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         floors.iter_mut().for_each(|f| f.layout.camera.policy = policy);
         (format!("{HELDOUT_FLOORS}, {policy:?} cameras"), floors)
     };
-    let scenario_3 =
-        |models: &std::sync::Arc<ModelSet>, (name, floors): (String, Vec<NamedLayout>), robots: usize, warm_s: u32| {
-            let r = run(&EvalOptions {
-                scenario: Scenario::Dynamic,
-                robots,
-                models: models.clone(),
-                floors,
-                floors_name: name,
-                episodes: s.episodes,
-                seed: s.seed,
-                ticks: s.ticks,
-                faults: Faults::none(),
-                tick: TickConfig::default(),
-                warm_map_ticks: warm_s * 10,
-            })?;
-            super::print(&r);
-            anyhow::Ok(r)
-        };
+    let scenario_3 = |models: &std::sync::Arc<ModelSet>,
+                      (name, floors): (String, Vec<NamedLayout>),
+                      robots: usize,
+                      warm_s: u32,
+                      cnn1d: bool| {
+        let r = run(&EvalOptions {
+            scenario: Scenario::Dynamic,
+            robots,
+            models: models.clone(),
+            floors,
+            floors_name: name,
+            episodes: s.episodes,
+            seed: s.seed,
+            ticks: s.ticks,
+            faults: Faults::none(),
+            tick: TickConfig::default(),
+            warm_map_ticks: warm_s * 10,
+            cnn1d,
+        })?;
+        super::print(&r);
+        anyhow::Ok(r)
+    };
     let unseen = unseen_floors(&s.floors_name, s.camera)?;
     for floors in &unseen {
-        st.generalisation.push(scenario_3(&default, floors.clone(), 3, 0)?);
+        st.generalisation.push(scenario_3(&default, floors.clone(), 3, 0, true)?);
     }
     for (models, policy, robots) in configs {
-        st.designs.push(scenario_3(models, on_heldout(policy), robots, 0)?);
+        st.designs.push(scenario_3(models, on_heldout(policy), robots, 0, false)?);
     }
     let mut warm: Vec<((String, Vec<NamedLayout>), usize)> = vec![(on_heldout(CameraPolicy::Fixed), 3)];
     warm.extend([1, 2, 3, 4].map(|n| (on_heldout(CameraPolicy::Track), n)));
     warm.extend(unseen.into_iter().filter(|(name, _)| name != HELDOUT_FLOORS).map(|f| (f, 3)));
     for (floors, robots) in warm {
-        st.warm_maps.push(scenario_3(&default, floors, robots, WARM_MAP_S)?);
+        st.warm_maps.push(scenario_3(&default, floors, robots, WARM_MAP_S, false)?);
     }
     Ok(st)
 }

@@ -1,10 +1,16 @@
 //! An `spwi-agent` process joining a loopback fleet: the command line every agent of
 //! the hub gets, and the handle to signal it (SIGTERM to leave, SIGSTOP to freeze,
 //! SIGKILL to vanish) and to wait for its exit. Dropping the handle kills it.
+//!
+//! An agent whose warnings are not shown (benchmarks) still keeps them: its stderr goes
+//! to an unlinked file only this handle reads, so an agent that dies on start is
+//! reported with its own words ([`AgentProcess::exited`]) instead of as a silent absence.
 
 use super::Hub;
 use anyhow::{bail, Context, Result};
 use spwi_proto::RobotId;
+use std::fs::File;
+use std::io::{Read, Seek};
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -22,7 +28,8 @@ pub struct Launch<'a> {
     pub models: Option<PathBuf>,
     /// Zenoh settings (`KEY:VALUE`) after the fleet's own.
     pub cfg: &'a [String],
-    /// Its warnings on this process's stderr (tests), or nothing (benchmarks).
+    /// Its warnings on this process's stderr (tests), or kept aside and shown only if
+    /// it exits (benchmarks).
     pub stderr: bool,
 }
 
@@ -44,6 +51,8 @@ impl<'a> Launch<'a> {
 pub struct AgentProcess {
     pub robot: RobotId,
     child: Child,
+    /// Its stderr, when not shown (unlinked: gone with the handle).
+    log: Option<File>,
 }
 
 impl AgentProcess {
@@ -66,8 +75,12 @@ impl AgentProcess {
             .args(launch.cfg.iter().flat_map(|c| ["--cfg", c.as_str()]))
             .env("RUST_LOG", "warn,zenoh=error")
             .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(if launch.stderr { Stdio::inherit() } else { Stdio::null() });
+            .stdout(Stdio::null());
+        let log = if launch.stderr { None } else { Some(unlinked_log(launch.robot)?) };
+        match &log {
+            Some(f) => command.stderr(f.try_clone()?),
+            None => command.stderr(Stdio::inherit()),
+        };
         if let Some(m) = &launch.models {
             command.arg("--models").arg(m);
         }
@@ -76,7 +89,24 @@ impl AgentProcess {
         }
         let child =
             command.spawn().with_context(|| format!("starting {:?} for {}", command.get_program(), launch.robot))?;
-        Ok(AgentProcess { robot: launch.robot.clone(), child })
+        Ok(AgentProcess { robot: launch.robot.clone(), child, log })
+    }
+
+    /// If it has exited: how, with the end of what it wrote on stderr when that was
+    /// kept aside.
+    pub fn exited(&mut self) -> Result<Option<String>> {
+        let Some(status) = self.child.try_wait()? else { return Ok(None) };
+        let mut said = String::new();
+        if let Some(f) = &mut self.log {
+            f.rewind()?;
+            f.read_to_string(&mut said)?;
+        }
+        let lines: Vec<&str> = said.lines().collect();
+        let last = &lines[lines.len().saturating_sub(5)..];
+        Ok(Some(match last.is_empty() {
+            true => format!("{} exited ({status})", self.robot),
+            false => format!("{} exited ({status}): {}", self.robot, last.join(" | ")),
+        }))
     }
 
     pub fn pid(&self) -> u32 {
@@ -115,6 +145,20 @@ impl Drop for AgentProcess {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// A file for `robot`'s stderr that no other process can open: created, then unlinked.
+fn unlinked_log(robot: &RobotId) -> Result<File> {
+    let path = std::env::temp_dir().join(format!("spwi-agent-{}-{robot}.log", std::process::id()));
+    let file = File::options()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&path)
+        .with_context(|| format!("{}: cannot create the agent's log", path.display()))?;
+    std::fs::remove_file(&path)?;
+    Ok(file)
 }
 
 fn signal(pid: u32, sig: &str) -> Result<()> {

@@ -196,13 +196,19 @@ impl LoopbackFleet {
         self.pid(slot).and_then(usage).unwrap_or_default()
     }
 
-    /// Waits until `n` robots hold their liveliness tokens.
-    pub async fn wait_members(&self, n: usize, limit: Duration) -> Result<()> {
+    /// Waits until `n` robots hold their liveliness tokens; fails at once, in the
+    /// agent's own words, if one of them has exited.
+    pub async fn wait_members(&mut self, n: usize, limit: Duration) -> Result<()> {
         let since = Instant::now();
-        let members = || self.traffic.lock().expect("traffic").members;
-        while members() != n {
+        let members = |f: &Self| f.traffic.lock().expect("traffic").members;
+        while members(self) != n {
+            for agent in self.agents.iter_mut().flatten() {
+                if let Some(how) = agent.exited()? {
+                    bail!("{how}");
+                }
+            }
             if since.elapsed() > limit {
-                bail!("{} agents hold a token, {n} expected within {limit:?}", members());
+                bail!("{} agents hold a token, {n} expected within {limit:?}", members(self));
             }
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
