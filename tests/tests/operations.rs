@@ -163,3 +163,19 @@ async fn sigterm_leaves_the_fleet_cleanly() {
         stays.stop().await.unwrap();
     });
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_agent_that_cannot_start_says_why_even_with_its_warnings_hidden() {
+    within!(30, "test", async {
+        let hub = Hub::start("nostart").await.unwrap();
+        let robot = id("n0");
+        let missing = std::env::temp_dir().join(format!("spwi-no-models-{}", std::process::id()));
+        // As the benchmarks start agents: stderr kept aside, not shown.
+        let launch = Launch { models: Some(missing.clone()), stderr: false, ..Launch::new(&hub, &robot) };
+        let mut agent = AgentProcess::spawn(std::process::Command::new(EXE), launch).unwrap();
+        assert!(!agent.wait_exit(Duration::from_secs(20)).await.unwrap().success());
+        let why = agent.exited().unwrap().expect("it has exited");
+        assert!(why.contains("n0") && why.contains("cannot read model manifest"), "{why}");
+        assert!(why.contains(&missing.join("manifest.json").display().to_string()), "{why}");
+    });
+}

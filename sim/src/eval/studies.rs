@@ -122,7 +122,7 @@ fn set_names(reports: &[Report]) -> String {
 
 pub fn run_all(s: &Settings) -> Result<Studies> {
     let default = load(&s.models_root, 20, 20, None)?;
-    // The 1D-CNN baseline runs only where a table shows it (Table II, the unseen floors).
+    // The 1D-CNN baseline runs only where a table shows it (Table IV, the unseen floors).
     let one_with = |scenario: u8,
                     robots: usize,
                     models: &std::sync::Arc<ModelSet>,
