@@ -5,9 +5,11 @@
 //! and on QUIC links of mixed reliability (a secured fleet; the per-tick messages go as
 //! datagrams). Needs root (CI runs as root and sets SPWI_REQUIRE_NETNS=1, so there it
 //! cannot skip); elsewhere it says loudly it skipped.
-//! Run: `cargo test -p spwi-tests --test lossy_links -- --nocapture` to see the figures;
-//! with `SPWI_TEST_RTO_MIN=5ms` the robots' routes resend lost TCP segments after 5 ms
-//! instead of Linux's 200 ms (deploy/README.md, "Lossy links").
+//! Run: `cargo test --workspace --test lossy_links -- --nocapture` to see the figures.
+//! The TCP links run as deploy/README.md ("Lossy links") tells an operator of lossy TCP
+//! links to set them up: the robots' routes resend a lost segment after 5 ms instead of
+//! Linux's 200 ms (`rto_min`). `SPWI_TEST_RTO_MIN=200ms` measures Linux's own timeout
+//! (figures printed; asserted only that every robot keeps deciding).
 
 use spwi_agent::fleet::authority::ThrowawayFleet;
 use spwi_proto::FleetId;
@@ -21,11 +23,18 @@ const ROBOTS: usize = 3;
 /// A phase: packets dropped between robots, the least share of common ticks with one
 /// decision, the least share of ticks each robot decides.
 type Phase = (f64, f64, f64);
-/// On TCP a lost segment holds every later message of its link until it is resent, at
-/// least 200 ms later on Linux: at 10 %, with the fixture's random votes (a missing
-/// ballot changes the decision), one decision on 94–98 % of ticks here; at 30 % on
-/// almost none, though every robot still decides.
-const TCP: [Phase; 3] = [(0.0, 0.98, 0.97), (0.10, 0.85, 0.95), (0.30, 0.0, 0.90)];
+/// On TCP a lost segment holds every later message of its link until it is resent. With
+/// the routes' `rto_min` at 5 ms, at 10 % one decision on 100 % of ticks in every run here
+/// (six), at 30 % on 35–73 % (head-of-line blocking on the links themselves), though
+/// every robot still decides. The fixture's random votes make this the harshest case: a
+/// missing ballot changes the decision.
+const TCP: [Phase; 3] = [(0.0, 0.98, 0.97), (0.10, 0.95, 0.95), (0.30, 0.20, 0.90)];
+/// The minimum retransmission timeout the robots' routes get (deploy/README.md).
+const RTO_MIN: &str = "5ms";
+/// With any other minimum, Linux's own 200 ms say, a resent segment comes after the 60 ms
+/// decision deadline: at 10 % one decision on 92–98 % of ticks in most runs here, but on
+/// 55.6 % in one of CI's; so only deciding is asserted then.
+const TCP_LINUX_RTO: [Phase; 3] = [(0.0, 0.98, 0.97), (0.10, 0.0, 0.95), (0.30, 0.0, 0.90)];
 /// On QUIC with mixed reliability a lost datagram loses one message and the ballot
 /// relay makes up for most: 98–100 % at 10 %, 80–84 % at 30 % in four runs here, and
 /// one run below 70 % (plain QUIC: 61 %); the bound at 30 % leaves room for that spread.
@@ -47,10 +56,12 @@ async fn robots_keep_deciding_and_agreeing_when_their_tcp_links_drop_packets() {
     }
     let _serial = serial().await;
     within!(120, "test", async {
-        let rto_min = std::env::var("SPWI_TEST_RTO_MIN").ok();
-        let net = LossyNetwork::create(ROBOTS, rto_min.as_deref()).unwrap();
+        let rto_min = std::env::var("SPWI_TEST_RTO_MIN").unwrap_or_else(|_| RTO_MIN.into());
+        let phases = if rto_min == RTO_MIN { TCP } else { TCP_LINUX_RTO };
+        eprintln!("tcp: the robots' routes resend a lost segment after {rto_min} at the earliest");
+        let net = LossyNetwork::create(ROBOTS, Some(&rto_min)).unwrap();
         let hub = Hub::start_listening("lossy", &format!("tcp/{}:0", netns::HOST_ADDRESS)).await.unwrap();
-        lose_packets(&net, &hub, "tcp", "", TCP).await;
+        lose_packets(&net, &hub, "tcp", "", phases).await;
     });
 }
 
