@@ -72,9 +72,14 @@ pub struct SoakReport {
     pub rss_mb_start: f64,
     pub rss_mb_end: f64,
     pub rss_growth_max: f64,
+    /// The same for the anonymous part of the RSS (heap, stacks; not the binary's code
+    /// pages, which fault in as code paths first run).
+    pub anon_mb_start: f64,
+    pub anon_mb_end: f64,
+    pub anon_growth_max: f64,
     /// (seconds from the start of the measurement, mean resident MB of the untouched
-    /// agents), every minute and at the end.
-    pub rss_mb_along: Vec<(f64, f64)>,
+    /// agents, the anonymous part of it), every minute and at the end.
+    pub rss_mb_along: Vec<(f64, f64, f64)>,
     pub open_files_start: usize,
     pub open_files_end: usize,
 }
@@ -130,6 +135,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     let (mut measure_from, mut at_start) = (None, Vec::new());
     let (mut rss_mb_along, mut next_rss) = (Vec::new(), WARMUP);
     let mean_rss = |usage: &[Usage]| mean(usage.iter().map(|u| u.rss_mb));
+    let mean_anon = |usage: &[Usage]| mean(usage.iter().map(|u| u.anon_mb));
     let (mut next_churn, mut next_freeze) = (WARMUP + o.churn, WARMUP + o.freeze_every / 2 + o.churn / 2);
     let mut thaw_at: Option<Duration> = None;
     let ticks = (o.duration.as_secs_f64() / TICK_PERIOD.as_secs_f64()).round() as u64;
@@ -144,7 +150,8 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
             break;
         }
         if since >= next_rss {
-            rss_mb_along.push(((since - WARMUP).as_secs_f64(), mean_rss(&resources(&fleet))));
+            let now = resources(&fleet);
+            rss_mb_along.push(((since - WARMUP).as_secs_f64(), mean_rss(&now), mean_anon(&now)));
             next_rss += RSS_EVERY;
         }
         if since >= next_churn {
@@ -185,7 +192,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     let at_end = resources(&fleet);
     let (measured_since, first_tick) = measure_from.expect("measured after the warm-up");
     let seconds = measured_since.elapsed().as_secs_f64();
-    rss_mb_along.push((seconds, mean_rss(&at_end)));
+    rss_mb_along.push((seconds, mean_rss(&at_end), mean_anon(&at_end)));
     let (decisions, ids) = (std::mem::take(&mut *fleet.decisions.lock()), fleet.ids.clone());
     drop(fleet);
 
@@ -211,11 +218,10 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
         latency_ms: LatencyMs::of(&[]),
         rss_mb_start: mean_rss(&at_start),
         rss_mb_end: mean_rss(&at_end),
-        rss_growth_max: at_start
-            .iter()
-            .zip(&at_end)
-            .map(|(a, b)| if a.rss_mb > 0.0 { b.rss_mb / a.rss_mb - 1.0 } else { 0.0 })
-            .fold(0.0, f64::max),
+        rss_growth_max: largest_growth(&at_start, &at_end, |u| u.rss_mb),
+        anon_mb_start: mean_anon(&at_start),
+        anon_mb_end: mean_anon(&at_end),
+        anon_growth_max: largest_growth(&at_start, &at_end, |u| u.anon_mb),
         rss_mb_along,
         open_files_start: at_start.iter().map(|u| u.open_files).sum(),
         open_files_end: at_end.iter().map(|u| u.open_files).sum(),
@@ -279,9 +285,15 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
+/// The largest relative growth of one agent's `measure` from `start` to `end`.
+fn largest_growth(start: &[Usage], end: &[Usage], measure: impl Fn(&Usage) -> f64) -> f64 {
+    let growth = |(a, b): (&Usage, &Usage)| if measure(a) > 0.0 { measure(b) / measure(a) - 1.0 } else { 0.0 };
+    start.iter().zip(end).map(growth).fold(0.0, f64::max)
+}
+
 pub fn print(r: &SoakReport) {
     println!(
-        "soak, {} robots, {:.0} s ({} ticks): {} leaves, {} joins, {} freezes · {} settled ticks: {} undecided, {} false removals, {} ghost members, agreement {:.2}%, frame → every decision p50 {:.2} ms, p99 {:.2} ms · untouched agents: RSS {:.1} → {:.1} MB (largest growth {:+.1}%), open files {} → {}",
+        "soak, {} robots, {:.0} s ({} ticks): {} leaves, {} joins, {} freezes · {} settled ticks: {} undecided, {} false removals, {} ghost members, agreement {:.2}%, frame → every decision p50 {:.2} ms, p99 {:.2} ms · untouched agents: RSS {:.1} → {:.1} MB (largest growth {:+.1}%), of it anonymous {:.1} → {:.1} MB (largest growth {:+.1}%), open files {} → {}",
         r.robots,
         r.seconds,
         r.ticks,
@@ -298,11 +310,15 @@ pub fn print(r: &SoakReport) {
         r.rss_mb_start,
         r.rss_mb_end,
         100.0 * r.rss_growth_max,
+        r.anon_mb_start,
+        r.anon_mb_end,
+        100.0 * r.anon_growth_max,
         r.open_files_start,
         r.open_files_end
     );
-    let along: Vec<String> = r.rss_mb_along.iter().map(|(s, mb)| format!("{s:.0} s {mb:.1}")).collect();
-    println!("untouched agents' mean RSS along the run (MB): {}", along.join(", "));
+    let along: Vec<String> =
+        r.rss_mb_along.iter().map(|(s, mb, anon)| format!("{s:.0} s {mb:.1} ({anon:.1})")).collect();
+    println!("untouched agents' mean RSS (anonymous) along the run (MB): {}", along.join(", "));
     if !r.undecided_by_robot.is_empty() {
         println!("settled ticks not decided, by robot: {:?}; events (s): {:?}", r.undecided_by_robot, r.events);
     }

@@ -6,7 +6,8 @@
 //! also wakes at the engine's next deadline, so ticks are decided on time even when
 //! peers fall silent. What goes out is put on Zenoh by a thread of its own
 //! ([`publishing`]), and `/status` is refreshed after each decision and membership
-//! change.
+//! change. The heap's free pages go back to the system every half minute ([`memory`]),
+//! so a daemon that runs for weeks keeps its size.
 //!
 //! Start-up refuses to join a fleet where a live daemon already holds our robot id
 //! (Zenoh would merge the two liveliness tokens into one member); a clash that happens
@@ -15,6 +16,7 @@
 
 mod connection;
 mod log;
+mod memory;
 mod publishing;
 
 use crate::config::AgentConfig;
@@ -114,6 +116,7 @@ pub async fn run(
         http_addr = Some(bound);
         http_task = Some(tokio::spawn(fut));
     }
+    let trim_task = tokio::spawn(memory::trim_every(memory::TRIM_PERIOD));
     let secured = credentials.is_some();
     tracing::info!(%robot, %fleet, instance, secured, http = ?http_addr, model_set = %models.manifest.name, "joined the fleet");
     if let Some(ready) = ready {
@@ -212,6 +215,8 @@ pub async fn run(
             tracing::warn!("the HTTP server task ended badly: {e}");
         }
     }
+    trim_task.abort(); // it runs until stopped; stopped, it has nothing left to do
+    let _ = trim_task.await;
     Ok(())
 }
 

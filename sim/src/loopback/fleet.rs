@@ -255,6 +255,10 @@ pub struct Usage {
     /// CPU seconds, user and system.
     pub cpu_s: f64,
     pub rss_mb: f64,
+    /// The anonymous part of the RSS (heap, stacks): what a process itself allocates,
+    /// unlike the binary's code pages, which grow as new code paths first run and are
+    /// shared by every agent on the host.
+    pub anon_mb: f64,
     pub open_files: usize,
 }
 
@@ -263,9 +267,12 @@ pub fn usage(pid: u32) -> Option<Usage> {
     let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
     let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let rss_kb: f64 = status.lines().find(|l| l.starts_with("VmRSS:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    let kb = |field: &str| -> Option<f64> {
+        status.lines().find(|l| l.starts_with(field))?.split_whitespace().nth(1)?.parse().ok()
+    };
+    let (rss_mb, anon_mb) = (kb("VmRSS:")? / 1024.0, kb("RssAnon:")? / 1024.0);
     let open_files = std::fs::read_dir(format!("/proc/{pid}/fd")).ok()?.count();
-    Some(Usage { cpu_s: ticks / 100.0, rss_mb: rss_kb / 1024.0, open_files }) // USER_HZ is 100 on Linux
+    Some(Usage { cpu_s: ticks / 100.0, rss_mb, anon_mb, open_files }) // USER_HZ is 100 on Linux
 }
 
 #[cfg(test)]
