@@ -3,9 +3,9 @@
 //! A daemon's live heap stays flat (≈ 6.3 MB over a 6-minute soak with robots leaving,
 //! joining and freezing, heaptrack), yet its anonymous memory grew ≈ 1.2 MB in five
 //! minutes: glibc's allocator keeps the pages freed between live allocations, and one
-//! `malloc_trim` gave all of it back (docs/BENCHMARKS.md, "Soak"). Trimming walks the
-//! heap's free lists once, on a task of its own, never on a tick's path. Other
-//! allocators (musl, macOS) have no `malloc_trim`: there this does nothing.
+//! `malloc_trim` gave nearly all of it back (docs/BENCHMARKS.md, "Soak"). Trimming
+//! walks the heap's free lists once, on a task of its own, never on a tick's path.
+//! Other allocators (musl, macOS) have no `malloc_trim`: there this does nothing.
 
 use std::time::{Duration, Instant};
 
