@@ -189,7 +189,12 @@ async fn run(args: Args) -> Result<()> {
     .context("model loading panicked")??;
     let (tx, rx) = watch::channel(false);
     spawn_signal_handler(tx);
-    daemon::run(Options { robot, fleet, config, zenoh, record: args.record, credentials }, models, rx, None).await
+    // The heap is the process's: one trimmer beside the daemon, stopped when it ends.
+    let trim = tokio::spawn(daemon::memory::trim_every(daemon::memory::TRIM_PERIOD));
+    let ran =
+        daemon::run(Options { robot, fleet, config, zenoh, record: args.record, credentials }, models, rx, None).await;
+    trim.abort();
+    ran
 }
 
 fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {

@@ -6,8 +6,8 @@
 //! also wakes at the engine's next deadline, so ticks are decided on time even when
 //! peers fall silent. What goes out is put on Zenoh by a thread of its own
 //! ([`publishing`]), and `/status` is refreshed after each decision and membership
-//! change. The heap's free pages go back to the system every half minute ([`memory`]),
-//! so a daemon that runs for weeks keeps its size.
+//! change. The `spwi-agent` process gives its heap's free pages back every half minute
+//! ([`memory`]; once per process, not per daemon, as the heap is the process's).
 //!
 //! Start-up refuses to join a fleet where a live daemon already holds our robot id
 //! (Zenoh would merge the two liveliness tokens into one member); a clash that happens
@@ -16,7 +16,7 @@
 
 mod connection;
 mod log;
-mod memory;
+pub mod memory;
 mod publishing;
 
 use crate::config::AgentConfig;
@@ -116,7 +116,6 @@ pub async fn run(
         http_addr = Some(bound);
         http_task = Some(tokio::spawn(fut));
     }
-    let trim_task = tokio::spawn(memory::trim_every(memory::TRIM_PERIOD));
     let secured = credentials.is_some();
     tracing::info!(%robot, %fleet, instance, secured, http = ?http_addr, model_set = %models.manifest.name, "joined the fleet");
     if let Some(ready) = ready {
@@ -215,8 +214,6 @@ pub async fn run(
             tracing::warn!("the HTTP server task ended badly: {e}");
         }
     }
-    trim_task.abort(); // it runs until stopped; stopped, it has nothing left to do
-    let _ = trim_task.await;
     Ok(())
 }
 
