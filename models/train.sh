@@ -8,7 +8,8 @@
 #   4. train_temporal.py per model set: ego-GRU, collective-GRU (and the 1D-CNN baseline
 #      for the default set), temperature scaling, export, checks, manifest. `paper` is
 #      the paper's design (rows: embeddings and keypoints); `default` adds the worker's
-#      relations to the mapped stations (agent/src/floor/); both share the GCN and data.
+#      relations to the mapped stations (agent/src/floor/); `peer-set` also pools one
+#      relation block per peer heard in its collective GRU; all share the GCN and data.
 #
 # Usage: models/train.sh            (all sets; see models/README.md for the time)
 #        SETS="default" models/train.sh
@@ -25,7 +26,7 @@ cd "$(dirname "$0")/.."
 EPISODES="${EPISODES:-300}"
 SEED="${SEED:-1}"
 LAYOUTS="${LAYOUTS:-train:0..300}"
-SETS="${SETS:-paper default w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
+SETS="${SETS:-paper default peer-set w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
 VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
 DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
 OUT="$(realpath -m "${MODELS_OUT:-models}")"
@@ -44,11 +45,13 @@ SIM="$CARGO_TARGET_DIR/release/spwi-sim"
 
 # Training seeds: scenario s of seed N exports with seed 10 N + s. The evaluation
 # (spwi-sim eval) uses other seeds and checks that no episode seed overlaps.
-export_all() { # $1: part name, then extra dataset flags
-  local part="$1"; shift
+# The sets see 4 robots an episode; the peer set sees 8, so that a robot has up to 7
+# peers (the same episodes: robots 4-7 join the same worker on the same floors).
+export_all() { # $1: part name, $2: robots, then extra dataset flags
+  local part="$1" robots="$2"; shift 2
   local pids=()
   for s in 1 2 3; do
-    "$SIM" dataset --scenario "$s" --layouts "$LAYOUTS" --episodes "$EPISODES" --robots 4 --ticks 300 \
+    "$SIM" dataset --scenario "$s" --layouts "$LAYOUTS" --episodes "$EPISODES" --robots "$robots" --ticks 300 \
       --seed $((SEED * 10 + s)) --out "$DATA/$part-s$s" "$@" > "$DATA/$part-s$s.log" 2>&1 &
     pids+=($!)
     if [ "${#pids[@]}" -ge 2 ]; then wait "${pids[0]}"; pids=("${pids[@]:1}"); fi
@@ -73,7 +76,7 @@ json.dump({**json.load(open(f"{src}/manifest.json"))["training"]["gcn"], "from":
 PY
   else
     step "stage 1 data: spatial graphs, $EPISODES episodes x 3 scenarios x 4 robots"
-    export_all spatial --spatial-every 5
+    export_all spatial 4 --spatial-every 5
 
     step "stage 1: GCN"
     (cd models/train && "$PY" train_gcn.py --data "$DATA"/spatial-s{1,2,3} --out "$DATA/gcn" --seed "$SEED")
@@ -81,7 +84,11 @@ PY
   fi
 
   step "stage 2 data: temporal rows through the exported GCN (agent's Rust code)"
-  export_all temporal --gcn "$DATA/gcn/gcn.onnx" --human-features --spatial-every 1000000
+  export_all temporal 4 --gcn "$DATA/gcn/gcn.onnx" --human-features --spatial-every 1000000
+  case " $SETS " in *" peer-set "*)
+    step "stage 2 data: the same with 8 robots (the peer set's)"
+    export_all temporal8 8 --gcn "$DATA/gcn/gcn.onnx" --spatial-every 1000000 ;;
+  esac
 fi
 
 step "stage 2: temporal models"
@@ -89,6 +96,7 @@ for set in $SETS; do
   case "$set" in
     paper)      args=(--window 20 --horizon 20) ;;
     default)    args=(--window 20 --horizon 20 --relations --cnn1d) ;;
+    peer-set)   args=(--window 20 --horizon 20 --relations --peer-set) ;;
     # The study sets: the default's design, other windows and frame counts.
     w10-h10)    args=(--window 10 --horizon 10 --relations) ;;
     w30-h30)    args=(--window 30 --horizon 30 --relations) ;;
@@ -96,7 +104,8 @@ for set in $SETS; do
     w10-h10-f3) args=(--window 10 --horizon 10 --frames 3 --relations) ;;
     *) echo "unknown model set $set" >&2; exit 2 ;;
   esac
-  (cd models/train && "$PY" train_temporal.py --data "$DATA"/temporal-s{1,2,3} --gcn-dir "$DATA/gcn" \
+  data=temporal; [ "$set" != peer-set ] || data=temporal8
+  (cd models/train && "$PY" train_temporal.py --data "$DATA/$data"-s{1,2,3} --gcn-dir "$DATA/gcn" \
     --out "$OUT/$set" --seed "$SEED" "${args[@]}")
   # The study sets' GCN fixes its node count (the daemon pads their graphs): a model
   # from elsewhere may, and the golden tests then cover both ways.

@@ -76,13 +76,14 @@ fn bench_backend(backend: Backend) {
     }
     let ego_in = vec![0.1f32; m.frames() * TemporalModel::Ego.row_dim(m.row)];
     let col_in = vec![0.1f32; m.frames() * TemporalModel::Collective.row_dim(m.row)];
+    let col_peers = vec![0.1f32; m.frames() * col.peer_slots() * spwi_agent::floor::RELATION_DIM];
     measure("ego-GRU", 3_000, || {
-        black_box(ego.gru(black_box(&ego_in)).unwrap());
+        black_box(ego.gru(black_box(&ego_in), &[]).unwrap());
     });
     measure("collective-GRU", 3_000, || {
-        black_box(col.gru(black_box(&col_in)).unwrap());
+        black_box(col.gru(black_box(&col_in), black_box(&col_peers)).unwrap());
     });
-    let logits = col.gru(&col_in).unwrap();
+    let logits = col.gru(&col_in, &col_peers).unwrap();
     let ids: Vec<RobotId> = (0..8).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect();
     let votes: Vec<Vec<StepVote>> = (0..8).map(|_| vote::vote(&logits, 1.3)).collect();
     measure("vote + consensus (8 robots, H+1 steps)", 20_000, || {

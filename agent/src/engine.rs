@@ -233,6 +233,8 @@ pub struct Engine {
     row_layout: RowLayout,
     floor: FloorView,
     scratch: Vec<f32>,
+    /// The peer input of a collective model with a peer set.
+    scratch_peers: Vec<f32>,
     temperature: f32,
     /// Live peers per liveliness (never ourselves).
     live: BTreeSet<RobotId>,
@@ -273,7 +275,7 @@ impl Engine {
     pub fn new(cfg: EngineConfig, inference: Inference) -> Self {
         let m = &inference.set().manifest;
         let graph = GraphBuilder::new(m.max_nodes, m.edge_weight);
-        let window = Window::with_frames(m.window, m.frames(), m.row);
+        let window = Window::with_frames(m.window, m.frames(), m.row).with_peer_slots(inference.peer_slots());
         let row_layout = m.row;
         let temperature = inference.set().temperature(cfg.temporal);
         let floor = FloorView::new(cfg.camera.clone());
@@ -286,6 +288,7 @@ impl Engine {
             row_layout,
             floor,
             scratch: Vec::new(),
+            scratch_peers: Vec::new(),
             temperature,
             live: BTreeSet::new(),
             active: BTreeSet::new(),
@@ -649,6 +652,10 @@ impl Engine {
         let trust = &self.trust;
         let fused = |i: usize| agrees.as_ref().is_none_or(|a| a[i]) && (robots[i] == me || trust.fuses(robots[i]));
         let team_worker = floor::fuse((0..estimates.len()).filter(|&i| fused(i)).map(|i| estimates[i]));
+        // A peer-set model also reads each fused peer's own estimate.
+        let slots = self.inference.peer_slots();
+        let fused_peers: Vec<&WorkerEstimate> =
+            (0..estimates.len()).filter(|&i| slots > 0 && robots[i] != me && fused(i)).map(|i| estimates[i]).collect();
         let peers_mean =
             temporal::mean(tick.embeddings.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, e)| e.as_deref()));
         // Judged after the fusion above, which used the trust earned before this tick;
@@ -668,16 +675,22 @@ impl Engine {
             }
             r
         });
+        let peers = (slots > 0).then(|| {
+            let mut p = vec![0.0; slots * RELATION_DIM];
+            floor::peer_set(&fused_peers, &self.floor.team_map.stations(), slots, &mut p);
+            p
+        });
         // The row is the last use of our embedding and keypoints: move them, don't copy.
-        let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations };
+        let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations, peers };
         let (visibility, quality) = (own.visibility, own.quality);
         self.window.insert(t, row);
         if !will_vote {
             return None;
         }
         self.window.input(t, self.cfg.temporal, &mut self.scratch);
+        self.window.peer_input(t, &mut self.scratch_peers);
         let t0 = Instant::now();
-        let logits = self.inference.gru(&self.scratch);
+        let logits = self.inference.gru(&self.scratch, &self.scratch_peers);
         self.metrics.observe(Stage::Gru, t0.elapsed());
         match logits {
             Ok(l) => Some(VoteMsg {

@@ -8,6 +8,7 @@
 //! file, the tensor and both shapes, rather than failing (or silently mispredicting)
 //! at the first tick.
 
+use crate::floor::RELATION_DIM;
 use crate::graph::{EdgeWeight, NODE_FEATURE_DIM};
 use crate::temporal::{RowLayout, TemporalModel, CNN1D_DIM};
 use serde::{Deserialize, Serialize};
@@ -185,6 +186,11 @@ pub struct Manifest {
     /// worker's relations to the mapped stations.
     #[serde(default, skip_serializing_if = "is_paper")]
     pub row: RowLayout,
+    /// Relation rows only: the collective GRU fuses its peers with a set model and
+    /// takes a second input, `peers` `[1, frames, peer_slots, RELATION_DIM]`, one
+    /// relation block per peer heard (`floor::peer_set`). Absent: rows only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peer_slots: Option<usize>,
     pub consensus: ConsensusDefaults,
     pub models: Models,
     /// Everything else (dataset, evaluation figures, code version) is kept as is.
@@ -275,9 +281,19 @@ impl Manifest {
         if !(1..=self.window).contains(&self.frames()) {
             return bad(format!("frames {} must be within 1..=window ({})", self.frames(), self.window));
         }
+        match (self.peer_slots, self.row) {
+            (None, _) => {}
+            (Some(s), RowLayout::Relations) if (1..=64).contains(&s) => {}
+            (Some(s), RowLayout::Relations) => return bad(format!("peer_slots {s} out of range (1..=64)")),
+            (Some(_), row) => {
+                return bad(format!("peer_slots needs relation rows (\"row\": \"relations\"), not {row:?}"))
+            }
+        }
         let (n, w, steps) = (self.max_nodes, self.frames(), self.horizon + 1);
         let expect = |spec: &ModelSpec, what: ModelKind, want: &ModelSpec| {
-            let shapes = |ts: &[TensorSpec]| ts.iter().map(|t| shown(&t.shape)).collect::<Vec<_>>().join(" ");
+            let shapes = |ts: &[TensorSpec]| {
+                ts.iter().map(|t| format!("{} {}", t.name, shown(&t.shape))).collect::<Vec<_>>().join(", ")
+            };
             let same = |a: &[TensorSpec], b: &[TensorSpec]| a.iter().map(|t| &t.shape).eq(b.iter().map(|t| &t.shape));
             if !same(&spec.inputs, &want.inputs) || !same(&spec.outputs, &want.outputs) {
                 return bad(format!(
@@ -294,9 +310,12 @@ impl Manifest {
             }
             Ok(())
         };
-        let one_input = |name: &str, shape: &[usize], steps: usize| ModelSpec {
+        let inputs = |tensors: &[(&str, Vec<usize>)], steps: usize| ModelSpec {
             file: String::new(),
-            inputs: vec![TensorSpec { name: name.into(), shape: Dim::fixed(shape) }],
+            inputs: tensors
+                .iter()
+                .map(|(name, shape)| TensorSpec { name: (*name).into(), shape: Dim::fixed(shape) })
+                .collect(),
             outputs: vec![TensorSpec { name: "logits".into(), shape: Dim::fixed(&[1, steps, NUM_CLASSES]) }],
             temperature: None,
         };
@@ -304,14 +323,18 @@ impl Manifest {
         for temporal in [TemporalModel::Ego, TemporalModel::Collective] {
             let kind = ModelKind::gru(temporal);
             let spec = self.models.get(kind).expect("every set has both GRUs");
-            expect(spec, kind, &one_input("window", &[1, w, temporal.row_dim(self.row)], steps))?;
+            let mut fed = vec![("window", vec![1, w, temporal.row_dim(self.row)])];
+            if let (TemporalModel::Collective, Some(slots)) = (temporal, self.peer_slots) {
+                fed.push(("peers", vec![1, w, slots, RELATION_DIM]));
+            }
+            expect(spec, kind, &inputs(&fed, steps))?;
             match spec.temperature {
                 Some(t) if t.is_finite() && t > 0.0 => {}
                 other => return bad(format!("{kind}.temperature is {other:?}; it must be a positive number")),
             }
         }
         if let Some(cnn) = &self.models.cnn1d {
-            expect(cnn, ModelKind::Cnn1d, &one_input("window", &[1, w, CNN1D_DIM], steps))?;
+            expect(cnn, ModelKind::Cnn1d, &inputs(&[("window", vec![1, w, CNN1D_DIM])], steps))?;
         }
         Ok(())
     }

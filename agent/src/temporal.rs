@@ -11,6 +11,10 @@
 //! seen, no peer saw it) contributes zeros, which is how the models are trained to read
 //! absence. Rows are keyed by tick, so a window is always the W ticks ending at t, in
 //! order, whatever order the ticks were processed in.
+//!
+//! A collective model with a peer set (`peer_slots` in its manifest) also reads, per
+//! picked tick, one relation block per peer heard ([`crate::floor::peer_set`]): its
+//! second input, `[frames, slots, RELATION_DIM]` ([`Window::peer_input`]).
 
 use crate::floor::RELATION_DIM;
 use spwi_proto::{EMBEDDING_DIM, KEYPOINT_VALUES};
@@ -80,6 +84,8 @@ pub struct Row {
     pub keypoints: Option<Vec<f32>>,
     /// The relation block, for [`RowLayout::Relations`].
     pub relations: Option<Vec<f32>>,
+    /// The peers' relation blocks (`slots` × `RELATION_DIM`), for a peer-set model.
+    pub peers: Option<Vec<f32>>,
 }
 
 /// Normalises pixel keypoints by the image size, x by width and y by height.
@@ -107,6 +113,8 @@ pub struct Window {
     layout: RowLayout,
     /// Which of the `len` ticks feed the model (all of them unless the model reads fewer frames).
     picked: Vec<usize>,
+    /// Peer blocks per row of the peer input (0: the model reads none).
+    peer_slots: usize,
     rows: BTreeMap<u64, Row>,
 }
 
@@ -119,7 +127,12 @@ impl Window {
     /// `len` ≥ 1 ticks of which `frames` (1..=len), at uniform intervals, feed the model.
     pub fn with_frames(len: usize, frames: usize, layout: RowLayout) -> Self {
         assert!(len >= 1, "a window holds at least one tick");
-        Window { len, layout, picked: frame_offsets(len, frames), rows: BTreeMap::new() }
+        Window { len, layout, picked: frame_offsets(len, frames), peer_slots: 0, rows: BTreeMap::new() }
+    }
+
+    /// The same window, also giving the peer input of a model with `slots` peer slots.
+    pub fn with_peer_slots(self, slots: usize) -> Self {
+        Window { peer_slots: slots, ..self }
     }
 
     /// Rows the model reads.
@@ -179,6 +192,23 @@ impl Window {
             }
         }
     }
+
+    /// The flattened `[frames, slots, RELATION_DIM]` peer input for the window ending
+    /// at `tick`, into `out` (empty when the model reads no peer set); rows without
+    /// peer blocks are zeros, read as no peer heard.
+    pub fn peer_input(&self, tick: u64, out: &mut Vec<f32>) {
+        let dim = self.peer_slots * RELATION_DIM;
+        out.clear();
+        out.resize(self.picked.len() * dim, 0.0);
+        let oldest = tick as i64 - (self.len as i64 - 1);
+        for (j, &k) in self.picked.iter().enumerate() {
+            let t = oldest + k as i64;
+            let Some(row) = u64::try_from(t).ok().and_then(|t| self.rows.get(&t)) else { continue };
+            if let Some(p) = &row.peers {
+                out[j * dim..(j + 1) * dim].copy_from_slice(p);
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -191,6 +221,7 @@ mod tests {
             peers_mean: Some(vec![-v; EMBEDDING_DIM]),
             keypoints: Some(vec![v / 10.0; KEYPOINT_VALUES]),
             relations: Some(vec![v * 100.0; RELATION_DIM]),
+            peers: Some(vec![v; 2 * RELATION_DIM]),
         }
     }
 
@@ -213,7 +244,7 @@ mod tests {
     fn collective_rows_carry_the_peer_mean_and_gaps_are_zero() {
         let mut w = Window::new(3);
         w.insert(5, row(1.0));
-        w.insert(7, Row { own: None, peers_mean: Some(vec![4.0; EMBEDDING_DIM]), keypoints: None, relations: None });
+        w.insert(7, Row { peers_mean: Some(vec![4.0; EMBEDDING_DIM]), ..Row::default() });
         let mut out = Vec::new();
         w.input(7, TemporalModel::Collective, &mut out);
         let d = COLLECTIVE_DIM;
@@ -269,6 +300,22 @@ mod tests {
         assert!(out[KEYPOINT_VALUES..d].iter().all(|&v| v == 100.0));
         assert!(out[d..d + KEYPOINT_VALUES].iter().all(|&v| v == 0.2));
         assert!(out[d + KEYPOINT_VALUES..].iter().all(|&v| v == 0.0), "no relations: zeros");
+    }
+
+    #[test]
+    fn the_peer_input_holds_each_picked_ticks_peer_blocks() {
+        let mut w = Window::with_frames(3, 2, RowLayout::Relations).with_peer_slots(2);
+        w.insert(10, row(1.0));
+        w.insert(11, row(2.0));
+        w.insert(12, Row { peers: None, ..row(3.0) });
+        let mut out = Vec::new();
+        w.peer_input(12, &mut out);
+        let d = 2 * RELATION_DIM;
+        assert_eq!(out.len(), 2 * d, "frames 10 and 12");
+        assert!(out[..d].iter().all(|&v| v == 1.0));
+        assert!(out[d..].iter().all(|&v| v == 0.0), "no peer heard: zeros");
+        Window::with_frames(3, 3, RowLayout::Relations).peer_input(12, &mut out);
+        assert!(out.is_empty(), "a model without a peer set reads none");
     }
 
     #[test]

@@ -139,7 +139,13 @@ fn ort_backend_without_the_feature_is_a_clear_error() {
 
 /// A copy of the fixture set in a fresh temporary folder, for tampering.
 fn fixture_copy(tag: &str) -> PathBuf {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
+    copy_of("fixture", tag)
+}
+
+/// A copy of the shipped set `set` (its manifest and GCN and GRUs) in a fresh
+/// temporary folder.
+fn copy_of(set: &str, tag: &str) -> PathBuf {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models").join(set);
     let dst = std::env::temp_dir().join(format!("spwi-golden-{tag}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dst);
     std::fs::create_dir_all(&dst).unwrap();
@@ -147,6 +153,28 @@ fn fixture_copy(tag: &str) -> PathBuf {
         std::fs::copy(src.join(f), dst.join(f)).unwrap();
     }
     dst
+}
+
+#[test]
+fn a_set_whose_collective_cannot_take_the_peer_input_is_refused_naming_it() {
+    // A relation set whose manifest claims a peer set its collective GRU does not read.
+    let dir = copy_of("default", "peers");
+    let edit = |f: &dyn Fn(&mut serde_json::Value)| {
+        let mut m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
+        f(&mut m);
+        std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    };
+    edit(&|m| m["peer_slots"] = 7.into());
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("collective_gru.onnx") && e.contains("peers [1, 20, 7, 27]"), "{e}");
+    // Peer blocks are relation blocks: a set of the paper's rows cannot have them.
+    edit(&|m| {
+        m.as_object_mut().unwrap().remove("row");
+    });
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("peer_slots needs relation rows"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
 }
 
 #[test]

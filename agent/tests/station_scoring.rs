@@ -3,6 +3,8 @@
 //! `StationScorer` of models/train/nets.py). So if the stations of every row are
 //! handed over in another order, the logits come back in that order, to float
 //! precision. A model that learned "slot 2 on the training floors" fails this test.
+//! Likewise a set that pools its peers (`peer_slots`) must not care which slot holds
+//! which peer.
 
 use spwi_agent::floor::relations::{PER_STATION, TRACK_VALUES};
 use spwi_agent::manifest::ModelKind;
@@ -66,4 +68,60 @@ fn reordering_the_stations_reorders_the_default_sets_logits() {
         }
         assert!(differs, "{name}: the stations' scores should differ, or the test shows nothing");
     }
+}
+
+/// Every shipped set that fuses its peers with a set model gives the same logits
+/// whatever slots its peers sit in (to float precision), and its output depends on
+/// them: the pooling is over peers, not slot positions.
+#[test]
+fn a_peer_set_gives_the_same_logits_for_its_peers_in_any_slots() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let mut checked = 0;
+    for dir in std::fs::read_dir(&root).unwrap().map(|e| e.unwrap().path()) {
+        let Ok(set) = ModelSet::load(&dir, Backend::Tract, None) else { continue };
+        let Some(slots) = set.manifest.peer_slots else { continue };
+        let reference: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
+        let spec = set.manifest.models.get(ModelKind::CollectiveGru).unwrap();
+        let input = |i: usize| -> (Vec<usize>, Vec<f32>) {
+            let t = &reference["collective_gru"]["inputs"][&spec.inputs[i].name];
+            let shape = t["shape"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+            (shape, t["data"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect())
+        };
+        let ((x_shape, x), (p_shape, peers)) = (input(0), input(1));
+        let block = p_shape[3];
+        let frames: Vec<&[f32]> = peers.chunks_exact(slots * block).collect();
+        let heard = |f: &[f32]| f.chunks_exact(block).filter(|b| b[0] > 0.0).count();
+        assert!(
+            frames.iter().any(|f| heard(f) >= 2),
+            "{}: the reference window should hold two or more peers",
+            dir.display()
+        );
+        let mut runner = set.runner(ModelKind::CollectiveGru).unwrap();
+        let mut logits = |peers: &[f32]| {
+            runner
+                .run(&[Input { shape: &x_shape, data: &x }, Input { shape: &p_shape, data: peers }])
+                .unwrap()
+                .remove(0)
+        };
+        let plain = logits(&peers);
+        // Each frame's slots rotated by a different amount: blocks move, empty slots too.
+        let shuffled: Vec<f32> = frames
+            .iter()
+            .enumerate()
+            .flat_map(|(j, f)| {
+                let mut blocks: Vec<&[f32]> = f.chunks_exact(block).collect();
+                blocks.rotate_left((j * 3 + 1) % slots);
+                blocks.concat()
+            })
+            .collect();
+        assert_ne!(shuffled, peers);
+        let worst = plain.iter().zip(logits(&shuffled)).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "{}: shuffled peers change the logits by {worst}", dir.display());
+        let alone = logits(&vec![0.0; peers.len()]);
+        let moved = plain.iter().zip(&alone).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(moved > 1e-3, "{}: the logits should depend on the peers, or the test shows nothing", dir.display());
+        checked += 1;
+    }
+    assert!(checked >= 1, "no shipped set has a peer set (models/peer-set)");
 }

@@ -8,6 +8,9 @@ the first tick, a row of zeros where a part is missing (worker not seen, no peer
 it), and `frames` of the W rows picked at uniform intervals by the same formula.
 With `relations`, a row is the keypoints and the worker's relations to the mapped
 stations: the robot's own (ego) or the team's (collective), as the agent computes them.
+With `peer_set` too, the collective's rows are the team's as the robot holds it when it
+hears a random subset of its peers (`relations_heard`), and a second input holds one
+relation block per peer it heard (`relations_peers`).
 """
 import json
 import os
@@ -75,6 +78,9 @@ class Sequences:
         self.feature = torch.from_numpy(ex.temporal("human_feature")) if need_features else None
         self.rel_ego = torch.from_numpy(ex.temporal("relations_ego"))
         self.rel_team = torch.from_numpy(ex.temporal("relations_team"))
+        heard = ex.has("temporal", "relations_peers")
+        self.rel_heard = torch.from_numpy(ex.temporal("relations_heard")) if heard else None
+        self.rel_peers = torch.from_numpy(ex.temporal("relations_peers")) if heard else None
         self.split = ex.temporal("split")[:, 0, 0]
         self.seed = ex.desc["seed"]
 
@@ -99,8 +105,9 @@ def gather(seqs, e, t, r, window, frames):
     return tt.clamp(min=0), valid
 
 
-def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1, relations=False):
-    """Inputs [B, F, D] and labels [B, H+1] for `kind` in ego, collective, cnn1d
+def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1, relations=False, peer_set=False):
+    """The model's inputs (a tuple: rows [B, F, D], and for a peer set the peer blocks
+    [B, F, P, RELATIONS]) and labels [B, H+1] for `kind` in ego, collective, cnn1d
     (with `relations`, ego and collective rows end with the relation block).
 
     Collective peers: at evaluation (peer_rng None) every other robot of the episode;
@@ -112,13 +119,17 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
     v = valid[..., None].float()
     kp = seqs.keypoints[E, tt, R] * v
     labels = seqs.truth[e, t, r, : horizon + 1]
+    if relations and kind == "collective" and peer_set:  # the peers this robot heard
+        if seqs.rel_peers is None:
+            raise SystemExit("a peer-set model needs an export with relations_peers (spwi-sim dataset, 2026-12-02 on)")
+        return (torch.cat([kp, seqs.rel_heard[E, tt, R] * v], -1), seqs.rel_peers[E, tt, R] * v[..., None]), labels
     if relations and kind != "cnn1d":  # agent/src/temporal.rs, RowLayout::Relations: keypoints ‖ relations
         rel = seqs.rel_ego if kind == "ego" else seqs.rel_team
-        return torch.cat([kp, rel[E, tt, R] * v], -1), labels
+        return (torch.cat([kp, rel[E, tt, R] * v], -1),), labels
     if kind == "ego":
-        return torch.cat([seqs.emb[E, tt, R] * v, kp], -1), labels
+        return (torch.cat([seqs.emb[E, tt, R] * v, kp], -1),), labels
     if kind == "cnn1d":
-        return torch.cat([seqs.feature[E, tt, R] * v, kp], -1), labels
+        return (torch.cat([seqs.feature[E, tt, R] * v, kp], -1),), labels
     assert kind == "collective"
     all_emb = seqs.emb[E, tt]  # [B, F, R, 128]
     present = seqs.seen[E, tt].float() * v  # [B, F, R]
@@ -135,4 +146,4 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
         present = present * (1 - drop)
     w = present * others[:, None, :]
     mean = (w[..., None] * all_emb).sum(2) / w.sum(2, keepdim=True).clamp(min=1)
-    return torch.cat([seqs.emb[E, tt, R] * v, mean, kp], -1), labels
+    return (torch.cat([seqs.emb[E, tt, R] * v, mean, kp], -1),), labels

@@ -9,6 +9,8 @@
 - StationScorer (relation rows): one small network, shared by every station, scores
   each station from the history of its own relation to the worker; a set summary of
   all stations' states (mean and max, DeepSets) lets each score see the others.
+- PeerSetScorer: a StationScorer that also pools the peers' own relations to each
+  station (DeepSets over the peers, any number from 0 to the slots).
 """
 import torch
 from torch import nn
@@ -81,11 +83,12 @@ class StationScorer(nn.Module):
     win because all the others are being left behind — also one nobody has mapped.
     """
 
-    def __init__(self, horizon, hidden=64, pose=16, dropout=0.1):
+    def __init__(self, horizon, hidden=64, pose=16, dropout=0.1, extra=0):
         super().__init__()
         self.steps = horizon + 1
         self.pose = nn.Linear(KEYPOINTS, pose)
-        self.gru = nn.GRU(PER_STATION + 2 + TRACK_VALUES + pose, hidden, batch_first=True)
+        # `extra`: per-station values a subclass adds to each step (PeerSetScorer).
+        self.gru = nn.GRU(PER_STATION + 2 + TRACK_VALUES + pose + extra, hidden, batch_first=True)
         # The head's first layer over [own state ‖ set summary], as two linear maps
         # added with broadcasting (no Expand/Concat feeding a MatMul, which tract 0.23
         # fails to optimise).
@@ -95,19 +98,59 @@ class StationScorer(nn.Module):
         self.out = nn.Linear(hidden, self.steps)
 
     def forward(self, x):
-        b, f, _ = x.shape
+        return self.score(self.station_rows(x))
+
+    def station_rows(self, x):
+        """Per station (class order), its [B, F, D] rows: its relation block, the
+        derived values, the track values and the keypoints' projection."""
         keypoints, track = x[..., :KEYPOINTS], x[..., KEYPOINTS : KEYPOINTS + TRACK_VALUES]
         shared = torch.cat([track, torch.relu(self.pose(keypoints))], -1)
-        stations = []
-        for k in range(CLASSES):
-            st = x[..., KEYPOINTS + TRACK_VALUES + k * PER_STATION : KEYPOINTS + TRACK_VALUES + (k + 1) * PER_STATION]
-            known, dist, closing, cos, sin = st[..., 0:1], st[..., 1:2], st[..., 2:3], st[..., 4:5], st[..., 5:6]
-            off_line = known * torch.where(cos > 0, dist * sin.abs(), dist)
-            eta = torch.where(closing > 0.1, dist * 10 / closing.clamp(min=0.1), torch.full_like(dist, 30.0)) / 30
-            stations.append(torch.cat([st, off_line, known * eta.clamp(max=1.0), shared], -1))
+        return [torch.cat([station_values(x[..., KEYPOINTS:], k), shared], -1) for k in range(CLASSES)]
+
+    def score(self, stations):
+        b, f, _ = stations[0].shape
         rows = torch.stack(stations, 1).reshape(b * CLASSES, f, -1)  # station-major
         _, h = self.gru(rows)
         h = h[-1].reshape(b, CLASSES, -1)
         summary = torch.cat([h.mean(1), h.max(1).values], -1)
         z = torch.relu(self.head_own(h) + self.head_set(summary)[:, None, :])
         return self.out(self.drop(z)).transpose(1, 2)
+
+
+def station_values(rel, k):
+    """Station k's relation block of a relation block `rel` [..., RELATIONS] and the two
+    values derived from it: the constant-velocity model's cost (off the worker's line,
+    or the distance when the worker stands or the station lies behind) and the time to
+    reach it at the closing speed (/ 3 s, at most 1)."""
+    st = rel[..., TRACK_VALUES + k * PER_STATION : TRACK_VALUES + (k + 1) * PER_STATION]
+    known, dist, closing, cos, sin = st[..., 0:1], st[..., 1:2], st[..., 2:3], st[..., 4:5], st[..., 5:6]
+    off_line = known * torch.where(cos > 0, dist * sin.abs(), dist)
+    eta = torch.where(closing > 0.1, dist * 10 / closing.clamp(min=0.1), torch.full_like(dist, 30.0)) / 30
+    return torch.cat([st, off_line, known * eta.clamp(max=1.0)], -1)
+
+
+class PeerSetScorer(StationScorer):
+    """A StationScorer whose collective input also holds one relation block per peer
+    heard ([B, F, P, RELATIONS], agent/src/floor/relations.rs `peer_set`: that peer's
+    own estimate of the worker against the team map, empty slots zero). Per station,
+    each peer's relation to it and its track values (presence, speed, position sigma:
+    its view quality) go through one small network phi; their masked mean and max over
+    the peers and the peer count / P join that station's row (DeepSets: the output is
+    the same whatever the peers' order, and any number of them from 0 to P fits).
+    """
+
+    def __init__(self, horizon, slots, phi=32, **kw):
+        super().__init__(horizon, extra=2 * phi + 1, **kw)
+        self.slots = slots
+        self.phi = nn.Sequential(nn.Linear(TRACK_VALUES + PER_STATION + 2, phi), nn.ReLU(), nn.Linear(phi, phi), nn.ReLU())
+
+    def forward(self, x, peers):
+        present = peers[..., 0:1]  # [B, F, P, 1]: a peer's block starts with 1
+        count = present.sum(2)
+        stations = []
+        for k, own in enumerate(self.station_rows(x)):
+            h = self.phi(torch.cat([peers[..., :TRACK_VALUES], station_values(peers, k)], -1)) * present
+            mean = h.sum(2) / count.clamp(min=1)
+            top = h.max(2).values  # phi's output is >= 0, so the empty slots' zeros never win
+            stations.append(torch.cat([own, mean, top, count / self.slots], -1))
+        return self.score(stations)

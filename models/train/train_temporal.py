@@ -3,7 +3,7 @@
 them, exports them and writes a complete model set the daemon loads.
 
 Usage: train_temporal.py --data DIR [DIR ...] --gcn-dir DIR --out models/NAME
-                         [--window 20 --horizon 20 --frames W] [--cnn1d] [--relations] [--epochs 8]
+                         [--window 20 --horizon 20 --frames W] [--cnn1d] [--relations [--peer-set]] [--epochs 8]
 
 DIR are `spwi-sim dataset --gcn GCN_DIR/gcn.onnx` exports (so the embeddings are the
 ones the agent's Rust code computes). Writes OUT/{gcn,ego_gru,collective_gru[,cnn1d]}.onnx,
@@ -21,9 +21,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, Export, Sequences, batch
+from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, PER_STATION, TRACK_VALUES, Export, Sequences, batch
 from export import OPSET, export, io_spec
-from nets import Cnn1dGRU, StationScorer, TemporalGRU
+from nets import Cnn1dGRU, PeerSetScorer, StationScorer, TemporalGRU
 
 DIMS = {"ego": EMBEDDING + KEYPOINTS, "collective": 2 * EMBEDDING + KEYPOINTS, "cnn1d": FEATURE + KEYPOINTS}
 FILES = {"ego": "ego_gru", "collective": "collective_gru", "cnn1d": "cnn1d"}
@@ -36,8 +36,8 @@ def logits_for(model, seqs, ends, a, kind, chunk=2048):
     with torch.no_grad():
         for i in range(0, len(ends[0]), chunk):
             e, t, r = (x[i : i + chunk] for x in ends)
-            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations)
-            out.append(model(x))
+            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set)
+            out.append(model(*x))
             labels.append(y)
     if not out:
         return torch.zeros(0, a.horizon + 1, CLASSES), torch.zeros(0, a.horizon + 1, dtype=torch.long)
@@ -82,6 +82,8 @@ def ece(logits, labels, temperature=1.0, bins=15):
 def train(kind, all_seqs, a, rng):
     if kind == "cnn1d":
         model = Cnn1dGRU(a.horizon)
+    elif a.relations and a.peer_set and kind == "collective":
+        model = PeerSetScorer(a.horizon, slots=all_seqs[0].rel_peers.shape[-2])
     elif a.relations:
         model = StationScorer(a.horizon)
     else:
@@ -103,8 +105,10 @@ def train(kind, all_seqs, a, rng):
             s, (e, t, r) = all_seqs[k], train_ends[k]
             i = torch.from_numpy(rng.integers(0, len(e), batch_size))
             peer_rng = rng if kind == "collective" else None
-            x, y = batch(s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng, relations=a.relations)
-            loss = nn.functional.cross_entropy(model(x).reshape(-1, CLASSES), y.reshape(-1))
+            x, y = batch(
+                s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng, relations=a.relations, peer_set=a.peer_set
+            )
+            loss = nn.functional.cross_entropy(model(*x).reshape(-1, CLASSES), y.reshape(-1))
             opt.zero_grad()
             loss.backward()
             nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -125,6 +129,27 @@ def train(kind, all_seqs, a, rng):
     return model, val_ends
 
 
+def reference_window(s, a, kind):
+    """The golden test's input: the first test window of export `s` that shows what
+    the model reads — for relation rows two or more stations mapped on its last row,
+    and for a peer set two or more peers heard on it (an episode's first windows have
+    empty maps and would leave those parts of the model untested)."""
+    e, t, r = s.ends("test")
+    for i in range(0, len(e), 512):
+        x, _ = batch(s, e[i : i + 512], t[i : i + 512], r[i : i + 512], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set)
+        ok = torch.ones(len(x[0]), dtype=torch.bool)
+        if a.relations and kind != "cnn1d":
+            known = x[0][:, -1, KEYPOINTS + TRACK_VALUES :: PER_STATION][:, :CLASSES]
+            ok &= (known > 0).sum(1) >= 2
+        if len(x) > 1:
+            ok &= (x[1][:, -1, :, 0] > 0).sum(1) >= 2
+        if ok.any():
+            j = int(ok.nonzero()[0])
+            return tuple(v[j : j + 1] for v in x)
+    x, _ = batch(s, e[:1], t[:1], r[:1], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set)
+    return x
+
+
 def code_version():
     try:
         return subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True, check=True).stdout.strip()
@@ -142,6 +167,9 @@ def main():
     ap.add_argument("--frames", type=int)
     ap.add_argument("--cnn1d", action="store_true", help="also train the 1D-CNN baseline")
     ap.add_argument("--relations", action="store_true", help="rows end with the worker's relations to the mapped stations")
+    ap.add_argument(
+        "--peer-set", action="store_true", help="with --relations: the collective GRU pools one relation block per peer it heard (PeerSetScorer)"
+    )
     ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--samples", type=int, default=60000, help="training windows per epoch")
     ap.add_argument("--every", type=int, default=2, help="use windows ending every Nth tick")
@@ -185,12 +213,9 @@ def main():
             test_labels.append(lb)
         lg, lb = torch.cat(test_logits), torch.cat(test_labels)
         calibration[kind] = {"temperature": round(temperature, 4), "ece_test_before": ece(lg, lb), "ece_test_after": ece(lg, lb, temperature)}
-        # reference input: a real test window of the last export
-        s = all_seqs[-1]
-        e, t, r = (x[:1] for x in s.ends("test"))
-        x, _ = batch(s, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations)
+        x = reference_window(all_seqs[-1], a, kind)
         path = os.path.join(a.out, f"{FILES[kind]}.onnx")
-        references[FILES[kind]] = export(model, (x,), ["x"], ["logits"], path)
+        references[FILES[kind]] = export(model, x, ["x", "peers"][: len(x)], ["logits"], path)
         models[FILES[kind]] = {"file": f"{FILES[kind]}.onnx", **io_spec(path), "temperature": round(temperature, 4)}
         print(f"  {kind}: test {evaluation[kind]}, calibration {calibration[kind]}", flush=True)
 
@@ -203,6 +228,7 @@ def main():
         "horizon": a.horizon,
         "edge_weight": exports[0].desc["edge_weight"],
         **({"row": "relations"} if a.relations else {}),
+        **({"peer_slots": int(all_seqs[0].rel_peers.shape[-2])} if a.peer_set else {}),
         "consensus": {"alpha": 0.5, "beta": 0.5},
         "opset": OPSET,
         "dataset": {
@@ -224,7 +250,8 @@ def main():
         },
         "evaluation": {
             "split": "test",
-            "note": "accuracy over the test episodes' ticks where the robot sees the worker; future = mean over t+1..t+H; collective with every other robot of the episode as a peer",
+            "note": "accuracy over the test episodes' ticks where the robot sees the worker; future = mean over t+1..t+H; collective with every other robot of the episode as a peer"
+            + (" (peer set: with the peers it heard, a random 0 to all of them, 10 % of their messages lost)" if a.peer_set else ""),
             "accuracy": evaluation,
             "calibration": calibration,
         },

@@ -14,7 +14,13 @@
 //!   own inference code — so training and serving cannot drift apart; and the worker's
 //!   relations to the mapped stations as the agent's [`FloorView`] computes them, from
 //!   the robot's own track and map (`relations_ego`) and from the team's fused track
-//!   and shared map, every robot of the episode being a peer (`relations_team`). With
+//!   and shared map, every robot of the episode being a peer (`relations_team`); and
+//!   for a set that fuses its peers with a learned set model, the same with the peers
+//!   a robot hears drawn at random (`relations_heard`: each robot hears a random 0 to
+//!   all of the others through an episode, each of their messages of a tick lost with
+//!   probability [`HEARD_LOSS`]) beside one relation block per heard peer
+//!   (`relations_peers`, [`PEER_SLOTS`] slots) — what its engine holds when its fleet
+//!   is that small or its links that lossy. With
 //!   `--human-features`, also the worker node's 1024-d feature (the 1D-CNN baseline's
 //!   input; 4 KB a row, so only when asked).
 //!
@@ -25,6 +31,8 @@ use crate::npy::NpyWriter;
 use crate::team_floor::TeamFloor;
 use crate::world_args::{check_robots, WorldArgs};
 use anyhow::{Context, Result};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde_json::json;
 use spwi_agent::floor::{self, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
@@ -37,6 +45,10 @@ use std::path::{Path, PathBuf};
 
 /// Future ticks of truth stored with every row.
 pub const FUTURE: usize = 30;
+/// Peer blocks per row of `relations_peers`: up to 8 robots' worth of peers.
+pub const PEER_SLOTS: usize = 7;
+/// Share of a heard peer's messages lost on each tick in `relations_heard`.
+pub const HEARD_LOSS: f64 = 0.1;
 
 pub struct DatasetOptions {
     pub scenario: Scenario,
@@ -84,6 +96,26 @@ pub fn episode_seed(seed: u64, e: u32) -> u64 {
     seed.wrapping_mul(1_000_003).wrapping_add(e as u64)
 }
 
+/// Who hears whom through an episode: `hears[listener][speaker]`. Each robot hears a
+/// number of the others drawn uniformly from none to all, then which ones at random.
+fn random_hearing(rng: &mut ChaCha8Rng, robots: usize) -> Vec<Vec<bool>> {
+    (0..robots)
+        .map(|listener| {
+            let mut others: Vec<usize> = (0..robots).filter(|&r| r != listener).collect();
+            let k = rng.gen_range(0..=others.len());
+            for i in 0..k {
+                let j = rng.gen_range(i..others.len());
+                others.swap(i, j);
+            }
+            let mut row = vec![false; robots];
+            for &r in &others[..k] {
+                row[r] = true;
+            }
+            row
+        })
+        .collect()
+}
+
 struct Spatial {
     x: NpyWriter<f32>,
     adj: NpyWriter<f32>,
@@ -107,6 +139,8 @@ struct Temporal {
     tick: NpyWriter<u32>,
     relations_ego: NpyWriter<f32>,
     relations_team: NpyWriter<f32>,
+    relations_heard: NpyWriter<f32>,
+    relations_peers: NpyWriter<f32>,
     embedding: Option<NpyWriter<f32>>,
     gcn_logits: Option<NpyWriter<f32>>,
     human_feature: Option<NpyWriter<f32>>,
@@ -122,6 +156,8 @@ struct Pending {
     human_feature: Vec<f32>,
     relations_ego: Vec<f32>,
     relations_team: Vec<f32>,
+    relations_heard: Vec<f32>,
+    relations_peers: Vec<f32>,
 }
 
 /// Writes the dataset; returns (spatial samples, temporal rows).
@@ -154,6 +190,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         tick: NpyWriter::create(&f(&td, "tick"), &[])?,
         relations_ego: NpyWriter::create(&f(&td, "relations_ego"), &[RELATION_DIM])?,
         relations_team: NpyWriter::create(&f(&td, "relations_team"), &[RELATION_DIM])?,
+        relations_heard: NpyWriter::create(&f(&td, "relations_heard"), &[RELATION_DIM])?,
+        relations_peers: NpyWriter::create(&f(&td, "relations_peers"), &[PEER_SLOTS, RELATION_DIM])?,
         embedding: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "embedding"), &[EMBEDDING_DIM])).transpose()?,
         gcn_logits: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "gcn_logits"), &[NUM_CLASSES])).transpose()?,
         human_feature: o
@@ -168,7 +206,13 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     for e in 0..o.episodes {
         let floor = &o.floors[e as usize % o.floors.len()].layout;
         let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
-        let mut team_floor = TeamFloor::new(crate::calibration::of(&floor.camera), o.robots);
+        let camera = crate::calibration::of(&floor.camera);
+        let mut team_floor = TeamFloor::new(camera.clone(), o.robots);
+        // The same fleet as each robot holds it when it hears only some peers, some
+        // of their messages lost: who hears whom is drawn once per episode.
+        let mut heard_floor = TeamFloor::new(camera, o.robots);
+        let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(o.seed, e) ^ 0x4845_4152_445f_5045); // "HEARD_PE"
+        let hears = random_hearing(&mut rng, o.robots);
         let total = o.ticks as usize + FUTURE;
         let mut intents = Vec::with_capacity(total);
         let mut phases = Vec::with_capacity(total);
@@ -198,6 +242,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                     human_feature: Vec::new(),
                     relations_ego: vec![0.0; RELATION_DIM],
                     relations_team: vec![0.0; RELATION_DIM],
+                    relations_heard: vec![0.0; RELATION_DIM],
+                    relations_peers: vec![0.0; PEER_SLOTS * RELATION_DIM],
                 };
                 if let Some(g) = graph.build(frame) {
                     if t % o.spatial_every == 0 {
@@ -230,6 +276,15 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 floor::relations(own[slot].as_ref(), &v.own_map.stations(), &mut row.relations_ego);
                 floor::relations(team.as_ref(), &v.team_map.stations(), &mut row.relations_team);
             }
+            let delivered: Vec<Vec<bool>> =
+                hears.iter().map(|row| row.iter().map(|&h| h && !rng.gen_bool(HEARD_LOSS)).collect()).collect();
+            let heard = heard_floor.observe_heard(&frames, |listener, speaker| delivered[listener][speaker]);
+            for (slot, (row, h)) in tick_rows.iter_mut().zip(&heard).enumerate() {
+                let stations = heard_floor.view(slot).team_map.stations();
+                floor::relations(h.team.as_ref(), &stations, &mut row.relations_heard);
+                let peers: Vec<_> = h.peers.iter().collect();
+                floor::peer_set(&peers, &stations, PEER_SLOTS, &mut row.relations_peers);
+            }
             rows.push(tick_rows);
         }
         for (t, tick_rows) in rows.into_iter().enumerate() {
@@ -246,6 +301,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 tp.tick.push(&[t as u32])?;
                 tp.relations_ego.push(&r.relations_ego)?;
                 tp.relations_team.push(&r.relations_team)?;
+                tp.relations_heard.push(&r.relations_heard)?;
+                tp.relations_peers.push(&r.relations_peers)?;
                 if let (Some(em), Some(lg)) = (tp.embedding.as_mut(), tp.gcn_logits.as_mut()) {
                     em.push(&r.embedding)?;
                     lg.push(&r.logits)?;
@@ -271,7 +328,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     }
     sp.episode.finish()?;
     sp.tick.finish()?;
-    for w in [tp.keypoints, tp.relations_ego, tp.relations_team] {
+    for w in [tp.keypoints, tp.relations_ego, tp.relations_team, tp.relations_heard, tp.relations_peers] {
         w.finish()?;
     }
     for w in [tp.seen, tp.truth, tp.phase, tp.split, tp.robot] {
@@ -327,6 +384,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 "tick": ["uint32", ["rows"], "tick within the episode"],
                 "relations_ego": ["float32", ["rows", RELATION_DIM], "the worker's relations to the mapped stations from the robot's own track and map (agent/src/floor/relations.rs)"],
                 "relations_team": ["float32", ["rows", RELATION_DIM], "the same from the team's fused track and shared map, every robot of the episode a peer"],
+                "relations_heard": ["float32", ["rows", RELATION_DIM], format!("the same when the robot hears a random subset of the others (drawn per episode and robot: how many uniform in 0..robots-1, then which), each of their messages lost with probability {HEARD_LOSS}")],
+                "relations_peers": ["float32", ["rows", PEER_SLOTS, RELATION_DIM], "one relation block per peer heard in relations_heard: that peer's own estimate against the robot's team map; empty slots zero (floor::peer_set)"],
                 "embedding": ["float32", ["rows", EMBEDDING_DIM], "GCN embedding of the worker node (only with --gcn; zeros when not seen)"],
                 "gcn_logits": ["float32", ["rows", NUM_CLASSES], "GCN logits (only with --gcn; zeros when not seen)"],
                 "human_feature": ["float32", ["rows", NODE_FEATURE_DIM], "the worker node's feature, global ‖ local (only with --human-features; zeros when not seen)"],
@@ -474,6 +533,20 @@ mod tests {
         assert!(!arrays.contains_key("embedding") && !arrays.contains_key("gcn_logits"));
         assert!(arrays.contains_key("human_feature") && dir.join("temporal/human_feature.npy").is_file());
         std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn each_robot_hears_from_none_to_all_of_the_others_never_itself() {
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let mut counts = [0; 8];
+        for _ in 0..400 {
+            let hears = random_hearing(&mut rng, 8);
+            for (listener, row) in hears.iter().enumerate() {
+                assert!(!row[listener]);
+                counts[row.iter().filter(|&&h| h).count()] += 1;
+            }
+        }
+        assert!(counts.iter().all(|&c| c > 250), "0 to 7 peers, about equally often: {counts:?}");
     }
 
     #[test]

@@ -19,6 +19,17 @@ pub struct TeamFloor {
     views: Vec<FloorView>,
 }
 
+/// What one robot holds of a tick, after [`TeamFloor::observe_heard`].
+#[derive(Debug, Clone)]
+pub struct Heard {
+    /// Its own estimate of the worker.
+    pub own: Option<WorkerEstimate>,
+    /// The team's track: its own estimate fused with the peers' it heard.
+    pub team: Option<WorkerEstimate>,
+    /// The peers' estimates in that fusion.
+    pub peers: Vec<WorkerEstimate>,
+}
+
 impl TeamFloor {
     pub fn new(camera: CameraCalibration, robots: usize) -> Self {
         TeamFloor { views: vec![FloorView::new(camera); robots] }
@@ -27,17 +38,39 @@ impl TeamFloor {
     /// One tick: every robot's frame (by slot) in. Returns each robot's own estimate of
     /// the worker and the team's fused one.
     pub fn observe(&mut self, frames: &[DetectionFrame]) -> (Vec<Option<WorkerEstimate>>, Option<WorkerEstimate>) {
+        let heard = self.observe_heard(frames, |_, _| true);
+        let team = heard.first().and_then(|h| h.team);
+        (heard.into_iter().map(|h| h.own).collect(), team)
+    }
+
+    /// One tick in which robot `listener` hears robot `speaker` only if
+    /// `hears(listener, speaker)`: each robot's map takes the landmarks it heard, and
+    /// its team track fuses its own estimate with the peers' it heard, leaving out one
+    /// most others contradict — as an engine does with the messages that reached it.
+    pub fn observe_heard(&mut self, frames: &[DetectionFrame], hears: impl Fn(usize, usize) -> bool) -> Vec<Heard> {
         let shared: Vec<_> = self.views.iter_mut().zip(frames).map(|(v, f)| v.observe(f)).collect();
-        let team = floor::fuse(shared.iter().filter_map(|(w, _)| w.as_ref()));
+        let mut heard = Vec::with_capacity(self.views.len());
         for (slot, view) in self.views.iter_mut().enumerate() {
-            for (peer, (_, landmarks)) in shared.iter().enumerate() {
-                if peer != slot {
-                    view.add_peer_landmarks(landmarks);
-                }
+            let peers: Vec<usize> = (0..shared.len()).filter(|&p| p != slot && hears(slot, p)).collect();
+            for &p in &peers {
+                view.add_peer_landmarks(&shared[p].1);
             }
-            view.observe_worker(shared[slot].0.as_ref(), team.as_ref());
+            let own = shared[slot].0;
+            // (is a peer's, estimate): ours first, as the engine orders them.
+            let estimates: Vec<(bool, &WorkerEstimate)> = own
+                .iter()
+                .map(|e| (false, e))
+                .chain(peers.iter().filter_map(|&p| shared[p].0.as_ref()).map(|e| (true, e)))
+                .collect();
+            let agrees = floor::agrees_with_most(&estimates.iter().map(|(_, e)| *e).collect::<Vec<_>>());
+            let kept: Vec<(bool, &WorkerEstimate)> =
+                (0..estimates.len()).filter(|&i| agrees.as_ref().is_none_or(|a| a[i])).map(|i| estimates[i]).collect();
+            let team = floor::fuse(kept.iter().map(|(_, e)| *e));
+            let peers = kept.iter().filter(|(peer, _)| *peer).map(|(_, e)| **e).collect();
+            view.observe_worker(own.as_ref(), team.as_ref());
+            heard.push(Heard { own, team, peers });
         }
-        (shared.into_iter().map(|(w, _)| w).collect(), team)
+        heard
     }
 
     pub fn view(&self, slot: usize) -> &FloorView {
@@ -86,6 +119,33 @@ pub fn warm_up_seed(episode_seed: u64) -> u64 {
 mod tests {
     use super::*;
     use spwi_proto::Station;
+
+    #[test]
+    fn a_robot_holds_the_track_of_the_peers_it_hears_and_nobody_elses() {
+        let layout = Layout::default_layout();
+        let camera = crate::calibration::of(&layout.camera);
+        let (mut all, mut deaf, mut half) =
+            (TeamFloor::new(camera.clone(), 4), TeamFloor::new(camera.clone(), 4), TeamFloor::new(camera, 4));
+        let mut world = World::new(layout, Scenario::Dynamic, 9, 4);
+        let ids: Vec<RobotId> = (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect();
+        let mut fused_peers = 0;
+        for _ in 0..100 {
+            world.step();
+            let frames: Vec<DetectionFrame> = ids.iter().enumerate().map(|(s, id)| world.observe(s, id)).collect();
+            let (own, _) = all.observe(&frames);
+            for (slot, h) in deaf.observe_heard(&frames, |_, _| false).into_iter().enumerate() {
+                assert_eq!((h.own, h.team, h.peers.len()), (own[slot], own[slot], 0), "alone: its own track");
+            }
+            // Robot 0 hears robot 1 only: its peers are robot 1's estimate, fused with its own.
+            let h = half.observe_heard(&frames, |l, s| l != 0 || s == 1).remove(0);
+            assert_eq!(h.peers, own[1].into_iter().collect::<Vec<_>>());
+            assert_eq!(h.team, floor::fuse(own[0].iter().chain(&own[1])));
+            fused_peers += h.peers.len();
+        }
+        assert!(fused_peers > 20, "robot 1 should see the worker on some ticks: {fused_peers}");
+        let (own_maps, team_maps): (Vec<_>, Vec<_>) = deaf.maps().map(|(o, t)| (o.stations(), t.stations())).unzip();
+        assert_eq!(own_maps, team_maps, "a robot that hears nobody maps only what it saw");
+    }
 
     #[test]
     fn a_fleet_that_worked_on_the_floor_starts_with_its_stations_mapped() {

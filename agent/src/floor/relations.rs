@@ -8,6 +8,12 @@
 //! `[known, distance / 10 m, closing speed (m/s), sideways speed (m/s), cos bearing,
 //! sin bearing]`. Absent parts are zeros; the bearing is zero below
 //! [`MOVING`] (a standing worker has no direction).
+//!
+//! A set that fuses its peers with a learned set model (`peer_slots` in its manifest)
+//! also reads one such block per peer ([`peer_set`]): the relations of that peer's own
+//! estimate of the worker to the robot's team map. Its track values carry the peer's
+//! view quality (position sigma), and a slot whose first value is zero is empty, so
+//! the model also knows how many peers it heard.
 
 use spwi_proto::{WorkerEstimate, NUM_CLASSES};
 
@@ -49,6 +55,19 @@ pub fn relations(worker: Option<&WorkerEstimate>, stations: &[Option<[f32; 2]>; 
     }
 }
 
+/// One relation block per peer estimate into `out` (`slots` × [`RELATION_DIM`],
+/// empty slots zero), against the same map. With more peers than slots, those whose
+/// position is known best are kept. The order of the blocks carries no meaning: the
+/// model that reads them pools over the slots.
+pub fn peer_set(peers: &[&WorkerEstimate], stations: &[Option<[f32; 2]>; NUM_CLASSES], slots: usize, out: &mut [f32]) {
+    assert_eq!(out.len(), slots * RELATION_DIM);
+    let mut best: Vec<&WorkerEstimate> = peers.to_vec();
+    best.sort_by(|a, b| a.covariance[0].total_cmp(&b.covariance[0]));
+    for (i, block) in out.chunks_exact_mut(RELATION_DIM).enumerate() {
+        relations(best.get(i).copied(), stations, block);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -81,5 +100,21 @@ mod tests {
         assert_eq!(a, b);
         relations(None, &[Some([4.0, 6.0]), None, None, None], &mut a);
         assert!(a.iter().all(|&x| x == 0.0), "no track: zeros");
+    }
+
+    #[test]
+    fn a_peer_set_keeps_the_best_placed_peers_and_leaves_the_rest_of_its_slots_empty() {
+        let stations = [Some([10.0, 0.0]), None, None, None];
+        let wide = WorkerEstimate { covariance: [4.0, 0.0, 1.0], ..walker([0.0, 0.0], [1.0, 0.0]) };
+        let sharp = WorkerEstimate { covariance: [0.01, 0.0, 1.0], ..walker([1.0, 0.0], [1.0, 0.0]) };
+        let mut out = vec![7.0; 3 * RELATION_DIM];
+        peer_set(&[&wide, &sharp], &stations, 3, &mut out);
+        assert_eq!(out[0], 1.0);
+        assert_eq!(out[2], 0.1, "the sharper estimate first");
+        assert_eq!(out[RELATION_DIM + 2], 2.0);
+        assert!(out[2 * RELATION_DIM..].iter().all(|&x| x == 0.0), "an empty slot is zeros");
+        let mut one = vec![0.0; RELATION_DIM];
+        peer_set(&[&wide, &sharp], &stations, 1, &mut one);
+        assert_eq!(one[2], 0.1, "more peers than slots: the best placed kept");
     }
 }

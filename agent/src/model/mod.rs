@@ -10,6 +10,7 @@
 mod ort;
 mod tract;
 
+use crate::floor::RELATION_DIM;
 use crate::graph::StarGraph;
 use crate::manifest::{Dim, GcnNodes, Manifest, ModelKind, ModelSpec};
 use crate::temporal::TemporalModel;
@@ -215,11 +216,25 @@ impl Inference {
         self.gcn.run(g)
     }
 
-    /// Logits for t and each forecast step, from a `[frames, row_dim]` window.
-    pub fn gru(&mut self, window: &[f32]) -> Result<Vec<[f32; NUM_CLASSES]>> {
+    /// Peer blocks per row this robot's GRU reads (0: no peer input).
+    pub fn peer_slots(&self) -> usize {
+        match self.temporal {
+            TemporalModel::Collective => self.set.manifest.peer_slots.unwrap_or(0),
+            TemporalModel::Ego => 0,
+        }
+    }
+
+    /// Logits for t and each forecast step, from a `[frames, row_dim]` window and, for
+    /// a model with a peer set, its `[frames, slots, RELATION_DIM]` peer input (else
+    /// empty: `temporal::Window::peer_input` gives the right one).
+    pub fn gru(&mut self, window: &[f32], peers: &[f32]) -> Result<Vec<[f32; NUM_CLASSES]>> {
         let m = &self.set.manifest;
-        let dim = self.temporal.row_dim(m.row);
-        let out = self.gru.run(&[Input { shape: &[1, m.frames(), dim], data: window }])?;
+        let (frames, slots) = (m.frames(), self.peer_slots());
+        let fed = [
+            Input { shape: &[1, frames, self.temporal.row_dim(m.row)], data: window },
+            Input { shape: &[1, frames, slots, RELATION_DIM], data: peers },
+        ];
+        let out = self.gru.run(&fed[..if slots > 0 { 2 } else { 1 }])?;
         let logits = out.into_iter().next().context("gru gave no output")?;
         if logits.len() != (m.horizon + 1) * NUM_CLASSES || logits.iter().any(|v| !v.is_finite()) {
             bail!("gru gave {} values (want {}) or a non-finite one", logits.len(), (m.horizon + 1) * NUM_CLASSES);

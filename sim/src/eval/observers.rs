@@ -121,13 +121,13 @@ impl Observers {
             floor::relations(floor_view.own_estimate(t).as_ref(), &floor_view.own_map.stations(), &mut r);
             r
         });
-        self.ego_rows.insert(t, Row { own: embedding, peers_mean: None, keypoints: self.keypoints.take(), relations });
+        self.ego_rows.insert(t, Row { own: embedding, keypoints: self.keypoints.take(), relations, ..Row::default() });
         let mut out = Predictions::default();
         if !seen {
             return Ok(out);
         }
         self.ego_rows.input(t, TemporalModel::Ego, &mut self.scratch);
-        out.ego = Some(classes(&self.ego.gru(&self.scratch)?));
+        out.ego = Some(classes(&self.ego.gru(&self.scratch, &[])?));
         if let Some(cnn) = self.cnn1d.as_mut() {
             self.scratch.clear();
             self.scratch.resize(self.frames * CNN1D_DIM, 0.0);

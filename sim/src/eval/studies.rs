@@ -42,7 +42,8 @@ pub struct Studies {
     /// generated floors, the default floor with two stations swapped, and mirrored.
     pub generalisation: Vec<Report>,
     /// Scenario 3 on the held-out generated floors: the paper's design (`models/paper`)
-    /// against ours (`models/default`), trained on the same data, with fixed cameras and
+    /// and our peer set (`models/peer-set`) against ours (`models/default`), trained on
+    /// the same data, with fixed cameras and
     /// with cameras that track the worker; ours with 1 to 4 robots under tracking.
     pub designs: Vec<Report>,
     /// The default set with station maps warm ([`WARM_MAP_S`]): held-out floors with
@@ -54,6 +55,10 @@ pub struct Studies {
 /// How long the fleet of the warm-map study has worked on a floor before an episode:
 /// a minute, two episodes' length.
 pub const WARM_MAP_S: u32 = 60;
+
+/// The other designs shipped beside `models/default`, trained on the same data,
+/// compared with it on the held-out floors when present.
+pub const OTHER_DESIGNS: [&str; 2] = ["paper", "peer-set"];
 
 /// Held-out generated floors of the generalisation study.
 pub const HELDOUT_FLOORS: &str = "heldout:0..50";
@@ -198,13 +203,16 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
     if let Some(r) = st.scenarios.iter().find(|r| r.scenario == 3) {
         st.generalisation.push(r.clone());
     }
-    let paper = s.models_root.join("paper");
-    let paper =
-        paper.join("manifest.json").is_file().then(|| ModelSet::load(&paper, Backend::Tract, None)).transpose()?;
+    let others = OTHER_DESIGNS
+        .iter()
+        .map(|name| s.models_root.join(name))
+        .filter(|dir| dir.join("manifest.json").is_file())
+        .map(|dir| ModelSet::load(&dir, Backend::Tract, None))
+        .collect::<Result<Vec<_>>>()?;
     let heldout = generate::resolve(&[HELDOUT_FLOORS.parse().map_err(anyhow::Error::msg)?])?;
     let mut configs: Vec<(&std::sync::Arc<ModelSet>, CameraPolicy, usize)> = Vec::new();
     for policy in [CameraPolicy::Fixed, CameraPolicy::Track] {
-        configs.extend(paper.iter().map(|p| (p, policy, 3)));
+        configs.extend(others.iter().map(|p| (p, policy, 3)));
         configs.push((&default, policy, 3));
     }
     configs.extend([1, 2, 4].map(|n| (&default, CameraPolicy::Track, n)));
@@ -515,7 +523,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         );
         let _ = writeln!(
             w,
-            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `default`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `agent/src/floor/`), and votes from the track while it is fresh. CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
+            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `default`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `agent/src/floor/`), and votes from the track while it is fresh. `peer-set`: the default's rows, and a collective GRU that also pools one relation block per peer it heard (each peer's own estimate of the worker against the team map; DeepSets over 0–7 peers, `models/README.md`). CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
         );
         let _ = writeln!(
             w,
