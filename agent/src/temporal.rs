@@ -163,10 +163,7 @@ impl Window {
         let dim = model.row_dim(self.layout);
         out.clear();
         out.resize(self.picked.len() * dim, 0.0);
-        let oldest = tick as i64 - (self.len as i64 - 1); // may be negative: left padding
-        for (j, &k) in self.picked.iter().enumerate() {
-            let t = oldest + k as i64;
-            let Some(row) = u64::try_from(t).ok().and_then(|t| self.rows.get(&t)) else { continue };
+        for (j, row) in self.picked_rows(tick) {
             let slot = &mut out[j * dim..(j + 1) * dim];
             if self.layout == RowLayout::Relations {
                 if let Some(kp) = &row.keypoints {
@@ -200,14 +197,20 @@ impl Window {
         let dim = self.peer_slots * RELATION_DIM;
         out.clear();
         out.resize(self.picked.len() * dim, 0.0);
-        let oldest = tick as i64 - (self.len as i64 - 1);
-        for (j, &k) in self.picked.iter().enumerate() {
-            let t = oldest + k as i64;
-            let Some(row) = u64::try_from(t).ok().and_then(|t| self.rows.get(&t)) else { continue };
+        for (j, row) in self.picked_rows(tick) {
             if let Some(p) = &row.peers {
                 out[j * dim..(j + 1) * dim].copy_from_slice(p);
             }
         }
+    }
+
+    /// The rows the model reads for the window ending at `tick`, with the frame each
+    /// fills: ticks before the first (left padding) and ticks with no row are skipped.
+    fn picked_rows(&self, tick: u64) -> impl Iterator<Item = (usize, &Row)> {
+        let oldest = tick as i64 - (self.len as i64 - 1); // may be negative: left padding
+        self.picked.iter().enumerate().filter_map(move |(j, &k)| {
+            u64::try_from(oldest + k as i64).ok().and_then(|t| self.rows.get(&t)).map(|row| (j, row))
+        })
     }
 }
 
