@@ -13,8 +13,8 @@ pub struct LayoutArgs {
     #[arg(long, value_name = "SEED", conflicts_with = "mirror")]
     pub generate: Option<u64>,
     /// Mirror a floor (x → width − x): the built-in one, or FILE.
-    #[arg(long, value_name = "FILE", num_args = 0..=1, default_missing_value = "")]
-    pub mirror: Option<std::path::PathBuf>,
+    #[arg(long, value_name = "FILE", num_args = 0..=1)]
+    pub mirror: Option<Option<std::path::PathBuf>>,
     #[arg(long)]
     pub out: std::path::PathBuf,
 }
@@ -23,8 +23,8 @@ pub struct LayoutArgs {
 pub fn main(a: LayoutArgs) -> Result<()> {
     let layout = match (&a.generate, &a.mirror) {
         (Some(seed), _) => generate::layout(*seed),
-        (None, Some(p)) if p.as_os_str().is_empty() => Layout::default_layout().mirrored(),
-        (None, Some(p)) => Layout::load(p)?.mirrored(),
+        (None, Some(None)) => Layout::default_layout().mirrored(),
+        (None, Some(Some(p))) => Layout::load(p)?.mirrored(),
         (None, None) => bail!("say what to write: --generate SEED or --mirror [FILE]"),
     };
     layout.validate()?;
@@ -38,4 +38,26 @@ pub fn main(a: LayoutArgs) -> Result<()> {
         layout.close_pairs()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::LayoutArgs;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        layout: LayoutArgs,
+    }
+
+    #[test]
+    fn mirror_takes_the_built_in_floor_or_a_file() {
+        // world/README.md's own command: --mirror with no file, then --out.
+        let built_in = Cli::try_parse_from(["layout", "--mirror", "--out", "m.toml"]).unwrap().layout;
+        assert_eq!(built_in.mirror, Some(None));
+        let file = Cli::try_parse_from(["layout", "--mirror", "f.toml", "--out", "m.toml"]).unwrap().layout;
+        assert_eq!(file.mirror, Some(Some("f.toml".into())));
+        assert!(Cli::try_parse_from(["layout", "--generate", "3", "--mirror", "--out", "m.toml"]).is_err());
+    }
 }

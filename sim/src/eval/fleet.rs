@@ -14,7 +14,7 @@ use anyhow::Result;
 use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
 use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
-use spwi_proto::{encode, RobotId, Station, NUM_CLASSES};
+use spwi_proto::{encode, RobotId, Station, WorkerPhase, NUM_CLASSES};
 use spwi_world::layout::Layout;
 use spwi_world::world::{stream, Stream, World};
 use std::time::Duration;
@@ -45,6 +45,8 @@ pub struct Tallies {
     pub map: MapQuality,
     /// The same, on the ticks where the worker heads to a station of a close pair.
     pub close_pair: ClosePair,
+    /// The same, by where the tick falls in the worker's cycle ([`Phase`]).
+    pub by_phase: [PhaseTallies; Phase::ALL.len()],
     /// Per robot slot: gnn, ego, collective.
     pub per_robot: Vec<[Tally; 3]>,
     /// Per robot slot: the sum of the trust its votes carried, and their number.
@@ -88,6 +90,9 @@ impl Tallies {
             a.merge(b);
         }
         self.map.merge(&o.map);
+        for (a, b) in self.by_phase.iter_mut().zip(&o.by_phase) {
+            a.merge(b);
+        }
         if self.per_robot.len() < o.per_robot.len() {
             self.per_robot.resize(o.per_robot.len(), Default::default());
         }
@@ -173,6 +178,63 @@ pub struct ClosePair {
     pub farther_cvm: Tally,
 }
 
+/// Where a tick falls in the worker's cycle: at work, or walking so long after it
+/// committed to its goal (the label changes in that very tick; a spawn is a commitment
+/// too). The intent of a walk shows in the motion only as the motion builds up, so the
+/// first second of a goal is where any predictor must be weakest.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    AtWork,
+    FirstHalfSecond,
+    SecondHalfSecond,
+    OneToTwoSeconds,
+    Later,
+}
+
+impl Phase {
+    pub const ALL: [Phase; 5] =
+        [Phase::AtWork, Phase::FirstHalfSecond, Phase::SecondHalfSecond, Phase::OneToTwoSeconds, Phase::Later];
+
+    /// The phase of a tick `ticks_on_goal` ticks (10 Hz) after the goal was committed to.
+    pub fn of(at_work: bool, ticks_on_goal: u64) -> Phase {
+        match (at_work, ticks_on_goal) {
+            (true, _) => Phase::AtWork,
+            (false, 0..5) => Phase::FirstHalfSecond,
+            (false, 5..10) => Phase::SecondHalfSecond,
+            (false, 10..20) => Phase::OneToTwoSeconds,
+            (false, _) => Phase::Later,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Phase::AtWork => "at work",
+            Phase::FirstHalfSecond => "walking, first 0.5 s of the goal",
+            Phase::SecondHalfSecond => "walking, 0.5–1 s",
+            Phase::OneToTwoSeconds => "walking, 1–2 s",
+            Phase::Later => "walking, after 2 s",
+        }
+    }
+}
+
+/// Ticks of one [`Phase`], and how the collective, the ego and the CVM did on them.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PhaseTallies {
+    pub ticks: u64,
+    pub collective: Tally,
+    pub ego: Tally,
+    pub cvm: Tally,
+}
+
+impl PhaseTallies {
+    fn merge(&mut self, o: &PhaseTallies) {
+        self.ticks += o.ticks;
+        self.collective.merge(&o.collective);
+        self.ego.merge(&o.ego);
+        self.cvm.merge(&o.cvm);
+    }
+}
+
 /// Whether the worker at `at` heads for the farther station of a close pair.
 fn heads_for_farther(at: [f32; 2], goal: Station, pairs: &[(Station, Station)], spots: &[[f32; 2]]) -> bool {
     let d = |k: Station| spwi_world::geometry::dist(at, spots[k.index()]);
@@ -186,6 +248,7 @@ struct TickRecord {
     decisions: Vec<Vec<Station>>,
     /// The worker heads for the farther station of a close pair.
     farther: bool,
+    phase: Phase,
 }
 
 /// The daemon's own engine, with the evaluation's `[tick]` settings, for robot `slot`.
@@ -226,7 +289,8 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
     let mut stuck: Vec<StuckCamera> = (0..n).map(|_| StuckCamera::default()).collect();
     let mut looping: Vec<LoopingCamera> = (0..n).map(|_| LoopingCamera::default()).collect();
-    let mut intents = Vec::with_capacity(ticks + horizon);
+    let mut intents: Vec<Station> = Vec::with_capacity(ticks + horizon);
+    let mut ticks_on_goal = 0u64;
     let mut records = Vec::with_capacity(ticks);
     let mut tallies =
         Tallies { per_robot: vec![Default::default(); n], vote_trust: vec![(0.0, 0); n], ..Default::default() };
@@ -241,6 +305,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
 
     for step in 0..ticks + horizon {
         world.step();
+        ticks_on_goal = if intents.last().is_some_and(|&g| g != world.worker.goal) { 0 } else { ticks_on_goal + 1 };
         intents.push(world.worker.goal);
         if step >= ticks {
             continue;
@@ -309,13 +374,16 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             decisions.push(decided[slot].take().unwrap_or_default());
         }
         let farther = heads_for_farther(world.worker.position, world.worker.goal, &pairs, &spots);
-        records.push(TickRecord { per_robot, decisions, farther });
+        let phase = Phase::of(world.worker.phase == WorkerPhase::Stationary, ticks_on_goal);
+        records.push(TickRecord { per_robot, decisions, farther, phase });
     }
 
     // Score now that the truth of every horizon is known.
     for (t, rec) in records.iter().enumerate() {
         let truth = &intents[t..=t + horizon];
         let close = in_close_pair[truth[0].index()];
+        let phase = &mut tallies.by_phase[rec.phase as usize];
+        phase.ticks += 1;
         for (slot, p) in &rec.per_robot {
             let pr = &mut tallies.per_robot[*slot];
             if let Some(g) = p.gnn {
@@ -324,6 +392,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(e) = &p.ego {
                 tallies.ego.add(e, truth);
+                phase.ego.add(e, truth);
                 if close {
                     tallies.close_pair.ego.add(e, truth);
                 }
@@ -332,6 +401,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(c) = &p.collective {
                 tallies.collective.add(c, truth);
+                phase.collective.add(c, truth);
                 if *slot >= o.faults.lying() {
                     tallies.healthy_collective.add(c, truth);
                 }
@@ -356,6 +426,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(c) = &p.cvm {
                 tallies.cvm.add(c, truth);
+                phase.cvm.add(c, truth);
                 if close {
                     tallies.close_pair.cvm.add(c, truth);
                 }
@@ -401,8 +472,21 @@ fn encoded_len(o: &Output) -> usize {
 
 #[cfg(test)]
 mod tests {
-    use super::heads_for_farther;
+    use super::{heads_for_farther, Phase};
     use spwi_proto::Station::*;
+
+    #[test]
+    fn a_tick_s_phase_is_at_work_or_how_long_the_goal_has_held() {
+        assert_eq!(Phase::of(true, 0), Phase::AtWork, "arrived: at work whatever the goal's age");
+        assert_eq!(Phase::of(true, 300), Phase::AtWork);
+        assert_eq!(Phase::of(false, 0), Phase::FirstHalfSecond, "the tick of the commitment");
+        assert_eq!(Phase::of(false, 4), Phase::FirstHalfSecond);
+        assert_eq!(Phase::of(false, 5), Phase::SecondHalfSecond);
+        assert_eq!(Phase::of(false, 10), Phase::OneToTwoSeconds);
+        assert_eq!(Phase::of(false, 19), Phase::OneToTwoSeconds);
+        assert_eq!(Phase::of(false, 20), Phase::Later);
+        assert!(Phase::ALL.iter().enumerate().all(|(k, &p)| p as usize == k), "ALL indexes the tallies");
+    }
 
     #[test]
     fn the_farther_station_of_a_pair_is_the_one_the_walk_reaches_second() {

@@ -136,6 +136,9 @@ pub struct Report {
     /// The same models on the ticks where the worker heads to a station of a close
     /// pair (work spots within 3.5 m); absent when no floor has one.
     pub close_pair: BTreeMap<&'static str, Accuracy>,
+    /// The collective, the ego and the CVM by where the tick falls in the worker's
+    /// cycle: at work, or walking so long after committing to its goal.
+    pub by_phase: Vec<PhaseAccuracy>,
     pub per_robot: Vec<PerRobot>,
     /// Share of decided ticks on which every live robot decided the same class for t.
     pub agreement: f64,
@@ -157,6 +160,17 @@ pub struct Report {
     pub seconds: f64,
     /// Wall time per robot frame (world, all models, consensus), microseconds.
     pub per_frame_us: f64,
+}
+
+/// The models on the ticks of one phase of the worker's cycle ([`fleet::Phase`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct PhaseAccuracy {
+    pub phase: &'static str,
+    /// Share of all ticks in this phase.
+    pub share: f64,
+    pub collective: Accuracy,
+    pub ego: Accuracy,
+    pub cvm: Accuracy,
 }
 
 /// How the robots' team maps placed one station (over the scored robot-ticks).
@@ -255,6 +269,19 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         close_pair.insert("collective_farther", of(&|e| &e.close_pair.farther_collective));
         close_pair.insert("cvm_farther", of(&|e| &e.close_pair.farther_cvm));
     }
+    let by_phase = fleet::Phase::ALL
+        .iter()
+        .map(|&phase| {
+            let k = phase as usize;
+            PhaseAccuracy {
+                phase: phase.name(),
+                share: all.by_phase[k].ticks as f64 / all.ticks.max(1) as f64,
+                collective: of(&|e| &e.by_phase[k].collective),
+                ego: of(&|e| &e.by_phase[k].ego),
+                cvm: of(&|e| &e.by_phase[k].cvm),
+            }
+        })
+        .collect();
     let per_robot = (0..all.per_robot.len())
         .map(|slot| {
             let model = |k: usize| of(&|e| e.per_robot.get(slot).map_or(&EMPTY, |r| &r[k]));
@@ -279,6 +306,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         warm_map_s: f64::from(o.warm_map_ticks) / 10.0,
         models,
         close_pair,
+        by_phase,
         per_robot,
         agreement: if all.decided_ticks == 0 { 0.0 } else { all.agreed_ticks as f64 / all.decided_ticks as f64 },
         coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
@@ -418,6 +446,17 @@ pub fn print(r: &Report) {
             println!("    {:<13} {:>21} {:>21}", name, ci(a), ci_future(a));
         }
     }
+    println!("  by phase of the worker's cycle (share of ticks · collective · ego · CVM, at t):");
+    for p in &r.by_phase {
+        println!(
+            "    {:<33} {:>5}% {:>21} {:>21} {:>21}",
+            p.phase,
+            pct(p.share),
+            ci(&p.collective),
+            ci(&p.ego),
+            ci(&p.cvm)
+        );
+    }
     for p in &r.per_robot {
         println!(
             "  robot {:<4} trust {} · gnn {} · ego {} / {} · collective {} / {}",
@@ -551,6 +590,18 @@ mod tests {
         let rows: Vec<&str> = page.lines().filter(|l| l.starts_with("| test | 3 |")).collect();
         assert_eq!(rows.len(), 2, "{page}");
         assert!(rows[0].contains("| empty |") && rows[1].contains("| warm, 30 s |"), "{rows:?}");
+    }
+
+    #[test]
+    fn every_tick_falls_in_one_phase_and_the_first_half_second_of_a_goal_is_the_hard_part() {
+        let r = run(&EvalOptions { episodes: 2, ticks: 300, ..options(fixture(), Faults::none()) }).unwrap();
+        assert_eq!(r.by_phase.len(), fleet::Phase::ALL.len());
+        assert!(r.by_phase.iter().all(|p| p.share > 0.0), "10 s episodes hold every phase: {:?}", r.by_phase);
+        assert!((r.by_phase.iter().map(|p| p.share).sum::<f64>() - 1.0).abs() < 1e-9);
+        // The worker standing at its station shows its intent; one that has just left
+        // shows the station it leaves, so the constant-velocity model names that one.
+        let (at_work, leaving) = (r.by_phase[0].cvm.t, r.by_phase[1].cvm.t);
+        assert!(at_work > leaving + 0.3, "CVM at work {at_work}, first 0.5 s of a goal {leaving}");
     }
 
     #[test]

@@ -372,6 +372,18 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 "\n`*_farther`: the ticks where the goal is the station of the pair farther from the worker (its walk passes the nearer one first), i.e. the recall of the farther station."
             );
         }
+        if !r.by_phase.is_empty() {
+            let _ = writeln!(
+                w,
+                "\nBy where the tick falls in the worker's cycle: at work, or walking so long after it committed to its goal (the label changes in that very tick; the motion shows it only as it builds up):\n"
+            );
+            let _ = writeln!(w, "| phase | share of ticks | collective t | ego t | CVM t |\n|---|---|---|---|---|");
+            for p in &r.by_phase {
+                let c = |a: &super::score::Accuracy| with_ci(a.t, a.t_ci95);
+                let share = format!("{:.1}", 100.0 * p.share);
+                let _ = writeln!(w, "| {} | {share} | {} | {} | {} |", p.phase, c(&p.collective), c(&p.ego), c(&p.cvm));
+            }
+        }
         let _ = writeln!(w, "\nConfusion at t (rows: true station 0–3, columns: predicted):\n");
         for (name, c) in &r.confusion {
             let _ = writeln!(w, "- {name}: {}", c.iter().map(|row| format!("{row:?}")).collect::<Vec<_>>().join(" "));
