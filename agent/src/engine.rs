@@ -46,7 +46,7 @@
 
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
-use crate::floor::{self, CameraCalibration, FloorView, StationMap, RELATION_DIM};
+use crate::floor::{self, CameraCalibration, FloorView, StationMap, FACING_DIM, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
@@ -169,6 +169,9 @@ struct Own {
     keypoints: Option<Vec<f32>>,
     /// Our own track's estimate of the worker for this tick.
     worker: Option<WorkerEstimate>,
+    /// Where our frame shows the worker's body facing (floor frame, radians), for
+    /// rows with facing.
+    facing: Option<f32>,
     /// We vote for this tick: we see the worker, or (relation rows) we track it.
     will_vote: bool,
     /// The vote step ran: the window row is in and, if `will_vote`, we voted.
@@ -470,9 +473,13 @@ impl Engine {
         let visibility = f.visibility();
         let quality = vote::view_quality(&f);
         let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
+        let facing = match (self.row_layout, f.pose, &f.human) {
+            (RowLayout::RelationsFacing, Some(pose), Some(h)) => self.floor.camera().worker_facing(&pose, &h.keypoints),
+            _ => None,
+        };
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
-        let will_vote = embedding.is_some() || (self.row_layout == RowLayout::Relations && worker.is_some());
+        let will_vote = embedding.is_some() || (self.row_layout.reads_relations() && worker.is_some());
         out.push(Output::Embedding(EmbeddingMsg {
             robot: self.cfg.robot.clone(),
             instance: self.cfg.instance,
@@ -491,6 +498,7 @@ impl Engine {
             embedding,
             keypoints,
             worker,
+            facing,
             will_vote,
             vote_step_done: false,
         });
@@ -665,14 +673,19 @@ impl Engine {
         }
         self.floor.observe_worker(own.worker.as_ref(), team_worker.as_ref());
         let will_vote = own.will_vote;
-        let relations = (self.row_layout == RowLayout::Relations).then(|| {
+        // The ego model reads our own track and map, the collective the team's.
+        let (worker, stations) = match self.cfg.temporal {
+            TemporalModel::Ego => (own.worker.as_ref(), self.floor.own_map.stations()),
+            TemporalModel::Collective => (team_worker.as_ref(), self.floor.team_map.stations()),
+        };
+        let relations = self.row_layout.reads_relations().then(|| {
             let mut r = vec![0.0; RELATION_DIM];
-            match self.cfg.temporal {
-                TemporalModel::Ego => floor::relations(own.worker.as_ref(), &self.floor.own_map.stations(), &mut r),
-                TemporalModel::Collective => {
-                    floor::relations(team_worker.as_ref(), &self.floor.team_map.stations(), &mut r)
-                }
-            }
+            floor::relations(worker, &stations, &mut r);
+            r
+        });
+        let facing = (self.row_layout == RowLayout::RelationsFacing).then(|| {
+            let mut r = vec![0.0; FACING_DIM];
+            floor::facing(worker, own.facing, &stations, &mut r);
             r
         });
         let peers = (slots > 0).then(|| {
@@ -681,7 +694,8 @@ impl Engine {
             p
         });
         // The row is the last use of our embedding and keypoints: move them, don't copy.
-        let row = Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations, peers };
+        let row =
+            Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations, facing, peers };
         let (visibility, quality) = (own.visibility, own.quality);
         self.window.insert(t, row);
         if !will_vote {
@@ -1167,6 +1181,33 @@ pub(crate) mod tests {
         b.handle(Input::Embedding(EmbeddingMsg { tick: 21, ..announce(false) }), ms(2000));
         let out = b.handle(Input::Frame(DetectionFrame { robot: id("b"), ..localised(21, true) }), ms(2000));
         assert_eq!(decisions(&out).len(), 1, "a said it abstains from tick 21: b decides at once");
+    }
+
+    #[test]
+    fn a_facing_set_reads_where_its_own_frame_shows_the_worker_facing() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/facing");
+        let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
+        assert_eq!(set.manifest.row, RowLayout::RelationsFacing);
+        let mut a = engine("a", &set);
+        let localised = |tick, seen| DetectionFrame {
+            pose: Some(FloorPose { position: [1.0, 2.0], heading: 0.5 }),
+            ..frame("a", tick, seen)
+        };
+        let last_row = |e: &Engine, t: u64| {
+            let mut x = Vec::new();
+            e.window.input(t, TemporalModel::Collective, &mut x);
+            x.split_off(x.len() - temporal::FACING_ROW_DIM)
+        };
+        for t in 1..=3 {
+            take_vote(&a.handle(Input::Frame(localised(t, true)), ms(100 * t)));
+        }
+        let row = last_row(&a, 3);
+        assert_eq!(row[KEYPOINT_VALUES], 1.0, "the worker is tracked");
+        assert_eq!(row[temporal::RELATION_ROW_DIM], 1.0, "and its facing known from the frame");
+        // Not seen: the fresh track still votes, but nothing shows where it faces.
+        take_vote(&a.handle(Input::Frame(localised(4, false)), ms(400)));
+        let row = last_row(&a, 4);
+        assert_eq!((row[KEYPOINT_VALUES], row[temporal::RELATION_ROW_DIM]), (1.0, 0.0));
     }
 
     fn relaying(robot: &str, set: &Arc<ModelSet>, relay_after: Option<Duration>) -> Engine {

@@ -182,13 +182,15 @@ pub struct Manifest {
     pub frames: Option<usize>,
     pub horizon: usize,
     pub edge_weight: EdgeWeight,
-    /// What the temporal rows hold: the paper's parts only (absent), or also the
-    /// worker's relations to the mapped stations.
+    /// What the temporal rows hold: the paper's parts only (absent), or the worker's
+    /// relations to the mapped stations (`relations`), also where it faces
+    /// (`relations_facing`).
     #[serde(default, skip_serializing_if = "is_paper")]
     pub row: RowLayout,
-    /// Relation rows only: the collective GRU fuses its peers with a set model and
-    /// takes a second input, `peers` `[1, frames, peer_slots, RELATION_DIM]`, one
-    /// relation block per peer heard (`floor::peer_set`). Absent: rows only.
+    /// Relation rows (with or without facing) only: the collective GRU fuses its peers
+    /// with a set model and takes a second input, `peers` `[1, frames, peer_slots,
+    /// RELATION_DIM]`, one relation block per peer heard (`floor::peer_set`). Absent:
+    /// rows only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub peer_slots: Option<usize>,
     pub consensus: ConsensusDefaults,
@@ -283,8 +285,8 @@ impl Manifest {
         }
         match (self.peer_slots, self.row) {
             (None, _) => {}
-            (Some(s), RowLayout::Relations) if (1..=64).contains(&s) => {}
-            (Some(s), RowLayout::Relations) => return bad(format!("peer_slots {s} out of range (1..=64)")),
+            (Some(s), row) if row.reads_relations() && (1..=64).contains(&s) => {}
+            (Some(s), row) if row.reads_relations() => return bad(format!("peer_slots {s} out of range (1..=64)")),
             (Some(_), row) => {
                 return bad(format!("peer_slots needs relation rows (\"row\": \"relations\"), not {row:?}"))
             }

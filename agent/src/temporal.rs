@@ -12,11 +12,15 @@
 //! absence. Rows are keyed by tick, so a window is always the W ticks ending at t, in
 //! order, whatever order the ticks were processed in.
 //!
+//! Rows with facing ([`RowLayout::RelationsFacing`]) add, after the relations, where
+//! the worker's body faces against each station ([`crate::floor::facing`]), from the
+//! robot's own view of the keypoints.
+//!
 //! A collective model with a peer set (`peer_slots` in its manifest) also reads, per
 //! picked tick, one relation block per peer heard ([`crate::floor::peer_set`]): its
 //! second input, `[frames, slots, RELATION_DIM]` ([`Window::peer_input`]).
 
-use crate::floor::RELATION_DIM;
+use crate::floor::{FACING_DIM, RELATION_DIM};
 use spwi_proto::{EMBEDDING_DIM, KEYPOINT_VALUES};
 use std::collections::BTreeMap;
 
@@ -36,10 +40,21 @@ pub enum RowLayout {
     /// Keypoints, then the worker's relations to the mapped stations (the robot's own
     /// for the ego model, the team's for the collective).
     Relations,
+    /// [`RowLayout::Relations`], then where the worker faces against each station.
+    RelationsFacing,
+}
+
+impl RowLayout {
+    /// Rows of keypoints and relations (with or without facing): no embedding.
+    pub fn reads_relations(self) -> bool {
+        matches!(self, RowLayout::Relations | RowLayout::RelationsFacing)
+    }
 }
 
 /// Width of a relation row: keypoints ‖ relations.
 pub const RELATION_ROW_DIM: usize = KEYPOINT_VALUES + RELATION_DIM;
+/// Width of a relation row with facing: keypoints ‖ relations ‖ facing.
+pub const FACING_ROW_DIM: usize = RELATION_ROW_DIM + FACING_DIM;
 
 /// Width of one row of the 1D-CNN baseline: the worker node's feature ‖ keypoints.
 pub const CNN1D_DIM: usize = crate::graph::NODE_FEATURE_DIM + KEYPOINT_VALUES;
@@ -72,6 +87,7 @@ impl TemporalModel {
             (RowLayout::Paper, TemporalModel::Ego) => EGO_DIM,
             (RowLayout::Paper, TemporalModel::Collective) => COLLECTIVE_DIM,
             (RowLayout::Relations, _) => RELATION_ROW_DIM,
+            (RowLayout::RelationsFacing, _) => FACING_ROW_DIM,
         }
     }
 }
@@ -82,8 +98,10 @@ pub struct Row {
     pub own: Option<Vec<f32>>,
     pub peers_mean: Option<Vec<f32>>,
     pub keypoints: Option<Vec<f32>>,
-    /// The relation block, for [`RowLayout::Relations`].
+    /// The relation block, for [`RowLayout::Relations`] and with facing.
     pub relations: Option<Vec<f32>>,
+    /// The facing block, for [`RowLayout::RelationsFacing`].
+    pub facing: Option<Vec<f32>>,
     /// The peers' relation blocks (`slots` × `RELATION_DIM`), for a peer-set model.
     pub peers: Option<Vec<f32>>,
 }
@@ -165,12 +183,15 @@ impl Window {
         out.resize(self.picked.len() * dim, 0.0);
         for (j, row) in self.picked_rows(tick) {
             let slot = &mut out[j * dim..(j + 1) * dim];
-            if self.layout == RowLayout::Relations {
+            if self.layout.reads_relations() {
                 if let Some(kp) = &row.keypoints {
                     slot[..KEYPOINT_VALUES].copy_from_slice(kp);
                 }
                 if let Some(r) = &row.relations {
-                    slot[KEYPOINT_VALUES..].copy_from_slice(r);
+                    slot[KEYPOINT_VALUES..RELATION_ROW_DIM].copy_from_slice(r);
+                }
+                if let (RowLayout::RelationsFacing, Some(f)) = (self.layout, &row.facing) {
+                    slot[RELATION_ROW_DIM..].copy_from_slice(f);
                 }
                 continue;
             }
@@ -224,6 +245,7 @@ mod tests {
             peers_mean: Some(vec![-v; EMBEDDING_DIM]),
             keypoints: Some(vec![v / 10.0; KEYPOINT_VALUES]),
             relations: Some(vec![v * 100.0; RELATION_DIM]),
+            facing: Some(vec![-v; FACING_DIM]),
             peers: Some(vec![v; 2 * RELATION_DIM]),
         }
     }
@@ -303,6 +325,22 @@ mod tests {
         assert!(out[KEYPOINT_VALUES..d].iter().all(|&v| v == 100.0));
         assert!(out[d..d + KEYPOINT_VALUES].iter().all(|&v| v == 0.2));
         assert!(out[d + KEYPOINT_VALUES..].iter().all(|&v| v == 0.0), "no relations: zeros");
+    }
+
+    #[test]
+    fn facing_rows_add_the_facing_block_after_the_relations() {
+        let mut w = Window::with_frames(2, 2, RowLayout::RelationsFacing);
+        w.insert(4, row(1.0));
+        w.insert(5, Row { facing: None, ..row(2.0) });
+        let mut out = Vec::new();
+        w.input(5, TemporalModel::Ego, &mut out);
+        let d = FACING_ROW_DIM;
+        assert_eq!(TemporalModel::Collective.row_dim(RowLayout::RelationsFacing), d);
+        assert_eq!(out.len(), 2 * d);
+        assert!(out[KEYPOINT_VALUES..RELATION_ROW_DIM].iter().all(|&v| v == 100.0));
+        assert!(out[RELATION_ROW_DIM..d].iter().all(|&v| v == -1.0));
+        assert!(out[d + KEYPOINT_VALUES..d + RELATION_ROW_DIM].iter().all(|&v| v == 200.0));
+        assert!(out[d + RELATION_ROW_DIM..].iter().all(|&v| v == 0.0), "facing unknown: zeros");
     }
 
     #[test]

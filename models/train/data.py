@@ -10,7 +10,9 @@ With `relations`, a row is the keypoints and the worker's relations to the mappe
 stations: the robot's own (ego) or the team's (collective), as the agent computes them.
 With `peer_set` too, the collective's rows are the team's as the robot holds it when it
 hears a random subset of its peers (`relations_heard`), and a second input holds one
-relation block per peer it heard (`relations_peers`).
+relation block per peer it heard (`relations_peers`). With `facing`, each relation row
+also ends with where the worker's body faces against each station (`facing_ego` or
+`facing_team`: agent/src/floor/relations.rs, `facing`).
 """
 import json
 import os
@@ -26,6 +28,8 @@ FEATURE = 1024
 TRACK_VALUES = 3
 PER_STATION = 6
 RELATIONS = TRACK_VALUES + CLASSES * PER_STATION
+# agent/src/floor/relations.rs: FACING_DIM ([facing known] + 4 stations x [cos, sin])
+FACING = 1 + CLASSES * 2
 SPLITS = {"train": 0, "validation": 1, "test": 2}
 
 
@@ -81,6 +85,9 @@ class Sequences:
         heard = ex.has("temporal", "relations_peers")
         self.rel_heard = torch.from_numpy(ex.temporal("relations_heard")) if heard else None
         self.rel_peers = torch.from_numpy(ex.temporal("relations_peers")) if heard else None
+        facing = ex.has("temporal", "facing_team")
+        self.facing_ego = torch.from_numpy(ex.temporal("facing_ego")) if facing else None
+        self.facing_team = torch.from_numpy(ex.temporal("facing_team")) if facing else None
         self.split = ex.temporal("split")[:, 0, 0]
         self.seed = ex.desc["seed"]
 
@@ -105,10 +112,11 @@ def gather(seqs, e, t, r, window, frames):
     return tt.clamp(min=0), valid
 
 
-def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1, relations=False, peer_set=False):
+def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1, relations=False, peer_set=False, facing=False):
     """The model's inputs (a tuple: rows [B, F, D], and for a peer set the peer blocks
     [B, F, P, RELATIONS]) and labels [B, H+1] for `kind` in ego, collective, cnn1d
-    (with `relations`, ego and collective rows end with the relation block).
+    (with `relations`, ego and collective rows end with the relation block, and with
+    `facing` then the facing block).
 
     Collective peers: at evaluation (peer_rng None) every other robot of the episode;
     in training a random subset of 0..R-1 of them (0 with a small probability, so the
@@ -125,7 +133,12 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
         return (torch.cat([kp, seqs.rel_heard[E, tt, R] * v], -1), seqs.rel_peers[E, tt, R] * v[..., None]), labels
     if relations and kind != "cnn1d":  # agent/src/temporal.rs, RowLayout::Relations: keypoints ‖ relations
         rel = seqs.rel_ego if kind == "ego" else seqs.rel_team
-        return (torch.cat([kp, rel[E, tt, R] * v], -1),), labels
+        parts = [kp, rel[E, tt, R] * v]
+        if facing:  # RowLayout::RelationsFacing: ‖ facing
+            if seqs.facing_team is None:
+                raise SystemExit("a facing model needs an export with facing_ego and facing_team (spwi-sim dataset, 2026-12-02 on)")
+            parts.append((seqs.facing_ego if kind == "ego" else seqs.facing_team)[E, tt, R] * v)
+        return (torch.cat(parts, -1),), labels
     if kind == "ego":
         return (torch.cat([seqs.emb[E, tt, R] * v, kp], -1),), labels
     if kind == "cnn1d":

@@ -11,11 +11,13 @@
   all stations' states (mean and max, DeepSets) lets each score see the others.
 - PeerSetScorer: a StationScorer that also pools the peers' own relations to each
   station (DeepSets over the peers, any number from 0 to the slots).
+- FacingScorer: a StationScorer whose rows also say where the worker's body faces
+  against each station.
 """
 import torch
 from torch import nn
 
-from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, PER_STATION, TRACK_VALUES
+from data import CLASSES, EMBEDDING, FACING, FEATURE, KEYPOINTS, PER_STATION, RELATIONS, TRACK_VALUES
 
 
 class GCN(nn.Module):
@@ -154,3 +156,19 @@ class PeerSetScorer(StationScorer):
             top = h.max(2).values  # phi's output is >= 0, so the empty slots' zeros never win
             stations.append(torch.cat([own, mean, top, count / self.slots], -1))
         return self.score(stations)
+
+
+class FacingScorer(StationScorer):
+    """A StationScorer over rows that end with the facing block (agent/src/floor/
+    relations.rs `facing`: [known], then per station [cos, sin] of its bearing relative
+    to where the worker's body faces). Each station's row gains its own two values and
+    the known flag, so the rule learned holds for every station alike."""
+
+    def __init__(self, horizon, **kw):
+        super().__init__(horizon, extra=3, **kw)
+
+    def forward(self, x):
+        rows = self.station_rows(x[..., : KEYPOINTS + RELATIONS])
+        face = x[..., KEYPOINTS + RELATIONS :]
+        known = face[..., 0:1]
+        return self.score([torch.cat([row, known, face[..., 1 + 2 * k : 3 + 2 * k]], -1) for k, row in enumerate(rows)])

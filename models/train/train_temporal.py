@@ -3,7 +3,7 @@
 them, exports them and writes a complete model set the daemon loads.
 
 Usage: train_temporal.py --data DIR [DIR ...] --gcn-dir DIR --out models/NAME
-                         [--window 20 --horizon 20 --frames W] [--cnn1d] [--relations [--peer-set]] [--epochs 8]
+                         [--window 20 --horizon 20 --frames W] [--cnn1d] [--relations [--peer-set | --facing]] [--epochs 8]
 
 DIR are `spwi-sim dataset --gcn GCN_DIR/gcn.onnx` exports (so the embeddings are the
 ones the agent's Rust code computes). Writes OUT/{gcn,ego_gru,collective_gru[,cnn1d]}.onnx,
@@ -21,9 +21,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, PER_STATION, TRACK_VALUES, Export, Sequences, batch
+from data import CLASSES, EMBEDDING, FEATURE, KEYPOINTS, PER_STATION, RELATIONS, TRACK_VALUES, Export, Sequences, batch
 from export import OPSET, export, io_spec
-from nets import Cnn1dGRU, PeerSetScorer, StationScorer, TemporalGRU
+from nets import Cnn1dGRU, FacingScorer, PeerSetScorer, StationScorer, TemporalGRU
 
 DIMS = {"ego": EMBEDDING + KEYPOINTS, "collective": 2 * EMBEDDING + KEYPOINTS, "cnn1d": FEATURE + KEYPOINTS}
 FILES = {"ego": "ego_gru", "collective": "collective_gru", "cnn1d": "cnn1d"}
@@ -36,7 +36,7 @@ def logits_for(model, seqs, ends, a, kind, chunk=2048):
     with torch.no_grad():
         for i in range(0, len(ends[0]), chunk):
             e, t, r = (x[i : i + chunk] for x in ends)
-            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set)
+            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing)
             out.append(model(*x))
             labels.append(y)
     if not out:
@@ -84,6 +84,8 @@ def train(kind, all_seqs, a, rng):
         model = Cnn1dGRU(a.horizon)
     elif a.relations and a.peer_set and kind == "collective":
         model = PeerSetScorer(a.horizon, slots=all_seqs[0].rel_peers.shape[-2])
+    elif a.relations and a.facing:
+        model = FacingScorer(a.horizon)
     elif a.relations:
         model = StationScorer(a.horizon)
     else:
@@ -106,7 +108,7 @@ def train(kind, all_seqs, a, rng):
             i = torch.from_numpy(rng.integers(0, len(e), batch_size))
             peer_rng = rng if kind == "collective" else None
             x, y = batch(
-                s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng, relations=a.relations, peer_set=a.peer_set
+                s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng, relations=a.relations, peer_set=a.peer_set, facing=a.facing
             )
             loss = nn.functional.cross_entropy(model(*x).reshape(-1, CLASSES), y.reshape(-1))
             opt.zero_grad()
@@ -132,21 +134,24 @@ def train(kind, all_seqs, a, rng):
 def reference_window(s, a, kind):
     """The golden test's input: the first test window of export `s` that shows what
     the model reads — for relation rows two or more stations mapped on its last row,
-    and for a peer set two or more peers heard on it (an episode's first windows have
+    with facing the worker's facing known on it, and for a peer set two or more peers
+    heard on it (an episode's first windows have
     empty maps and would leave those parts of the model untested)."""
     e, t, r = s.ends("test")
     for i in range(0, len(e), 512):
-        x, _ = batch(s, e[i : i + 512], t[i : i + 512], r[i : i + 512], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set)
+        x, _ = batch(s, e[i : i + 512], t[i : i + 512], r[i : i + 512], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing)
         ok = torch.ones(len(x[0]), dtype=torch.bool)
         if a.relations and kind != "cnn1d":
             known = x[0][:, -1, KEYPOINTS + TRACK_VALUES :: PER_STATION][:, :CLASSES]
             ok &= (known > 0).sum(1) >= 2
         if len(x) > 1:
             ok &= (x[1][:, -1, :, 0] > 0).sum(1) >= 2
+        if a.facing and kind != "cnn1d":  # and where the worker faces
+            ok &= x[0][:, -1, KEYPOINTS + RELATIONS] > 0
         if ok.any():
             j = int(ok.nonzero()[0])
             return tuple(v[j : j + 1] for v in x)
-    x, _ = batch(s, e[:1], t[:1], r[:1], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set)
+    x, _ = batch(s, e[:1], t[:1], r[:1], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing)
     return x
 
 
@@ -170,6 +175,9 @@ def main():
     ap.add_argument(
         "--peer-set", action="store_true", help="with --relations: the collective GRU pools one relation block per peer it heard (PeerSetScorer)"
     )
+    ap.add_argument(
+        "--facing", action="store_true", help="with --relations: rows end with where the worker faces against each station (FacingScorer)"
+    )
     ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--samples", type=int, default=60000, help="training windows per epoch")
     ap.add_argument("--every", type=int, default=2, help="use windows ending every Nth tick")
@@ -177,6 +185,8 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args()
     a.frames = a.frames or a.window
+    if (a.peer_set or a.facing) and not a.relations or (a.peer_set and a.facing):
+        ap.error("--peer-set and --facing each need --relations, and not each other")
     torch.manual_seed(a.seed)
     torch.set_num_threads(a.threads)
     rng = np.random.default_rng(a.seed)
@@ -227,7 +237,7 @@ def main():
         **({"frames": a.frames} if a.frames != a.window else {}),
         "horizon": a.horizon,
         "edge_weight": exports[0].desc["edge_weight"],
-        **({"row": "relations"} if a.relations else {}),
+        **({"row": "relations_facing" if a.facing else "relations"} if a.relations else {}),
         **({"peer_slots": int(all_seqs[0].rel_peers.shape[-2])} if a.peer_set else {}),
         "consensus": {"alpha": 0.5, "beta": 0.5},
         "opset": OPSET,

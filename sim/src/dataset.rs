@@ -20,7 +20,9 @@
 //!   all of the others through an episode, each of their messages of a tick lost with
 //!   probability [`HEARD_LOSS`]) beside one relation block per heard peer
 //!   (`relations_peers`, [`PEER_SLOTS`] slots) — what its engine holds when its fleet
-//!   is that small or its links that lossy. With
+//!   is that small or its links that lossy; and where the worker's body faces, from
+//!   the robot's own keypoints, against the stations of its own map and track
+//!   (`facing_ego`) and of the team's (`facing_team`) ([`floor::facing`]). With
 //!   `--human-features`, also the worker node's 1024-d feature (the 1D-CNN baseline's
 //!   input; 4 KB a row, so only when asked).
 //!
@@ -34,7 +36,7 @@ use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
-use spwi_agent::floor::{self, RELATION_DIM};
+use spwi_agent::floor::{self, FACING_DIM, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::model::{Backend, Gcn};
 use spwi_agent::temporal::normalise_keypoints;
@@ -141,6 +143,8 @@ struct Temporal {
     relations_team: NpyWriter<f32>,
     relations_heard: NpyWriter<f32>,
     relations_peers: NpyWriter<f32>,
+    facing_ego: NpyWriter<f32>,
+    facing_team: NpyWriter<f32>,
     embedding: Option<NpyWriter<f32>>,
     gcn_logits: Option<NpyWriter<f32>>,
     human_feature: Option<NpyWriter<f32>>,
@@ -158,6 +162,8 @@ struct Pending {
     relations_team: Vec<f32>,
     relations_heard: Vec<f32>,
     relations_peers: Vec<f32>,
+    facing_ego: Vec<f32>,
+    facing_team: Vec<f32>,
 }
 
 /// Writes the dataset; returns (spatial samples, temporal rows).
@@ -192,6 +198,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         relations_team: NpyWriter::create(&f(&td, "relations_team"), &[RELATION_DIM])?,
         relations_heard: NpyWriter::create(&f(&td, "relations_heard"), &[RELATION_DIM])?,
         relations_peers: NpyWriter::create(&f(&td, "relations_peers"), &[PEER_SLOTS, RELATION_DIM])?,
+        facing_ego: NpyWriter::create(&f(&td, "facing_ego"), &[FACING_DIM])?,
+        facing_team: NpyWriter::create(&f(&td, "facing_team"), &[FACING_DIM])?,
         embedding: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "embedding"), &[EMBEDDING_DIM])).transpose()?,
         gcn_logits: o.gcn.as_ref().map(|_| NpyWriter::create(&f(&td, "gcn_logits"), &[NUM_CLASSES])).transpose()?,
         human_feature: o
@@ -208,9 +216,13 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
         let camera = crate::calibration::of(&floor.camera);
         let mut team_floor = TeamFloor::new(camera.clone(), o.robots);
+        let facing_of = |frame: &DetectionFrame| {
+            let (pose, h) = (frame.pose.as_ref()?, frame.human.as_ref()?);
+            camera.worker_facing(pose, &h.keypoints)
+        };
         // The same fleet as each robot holds it when it hears only some peers, some
         // of their messages lost: who hears whom is drawn once per episode.
-        let mut heard_floor = TeamFloor::new(camera, o.robots);
+        let mut heard_floor = TeamFloor::new(camera.clone(), o.robots);
         let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(o.seed, e) ^ 0x4845_4152_445f_5045); // "HEARD_PE"
         let hears = random_hearing(&mut rng, o.robots);
         let total = o.ticks as usize + FUTURE;
@@ -244,6 +256,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                     relations_team: vec![0.0; RELATION_DIM],
                     relations_heard: vec![0.0; RELATION_DIM],
                     relations_peers: vec![0.0; PEER_SLOTS * RELATION_DIM],
+                    facing_ego: vec![0.0; FACING_DIM],
+                    facing_team: vec![0.0; FACING_DIM],
                 };
                 if let Some(g) = graph.build(frame) {
                     if t % o.spatial_every == 0 {
@@ -273,8 +287,12 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             let (own, team) = team_floor.observe(&frames);
             for (slot, row) in tick_rows.iter_mut().enumerate() {
                 let v = team_floor.view(slot);
-                floor::relations(own[slot].as_ref(), &v.own_map.stations(), &mut row.relations_ego);
-                floor::relations(team.as_ref(), &v.team_map.stations(), &mut row.relations_team);
+                let (own_stations, team_stations) = (v.own_map.stations(), v.team_map.stations());
+                floor::relations(own[slot].as_ref(), &own_stations, &mut row.relations_ego);
+                floor::relations(team.as_ref(), &team_stations, &mut row.relations_team);
+                let facing = facing_of(&frames[slot]);
+                floor::facing(own[slot].as_ref(), facing, &own_stations, &mut row.facing_ego);
+                floor::facing(team.as_ref(), facing, &team_stations, &mut row.facing_team);
             }
             let delivered: Vec<Vec<bool>> =
                 hears.iter().map(|row| row.iter().map(|&h| h && !rng.gen_bool(HEARD_LOSS)).collect()).collect();
@@ -303,6 +321,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 tp.relations_team.push(&r.relations_team)?;
                 tp.relations_heard.push(&r.relations_heard)?;
                 tp.relations_peers.push(&r.relations_peers)?;
+                tp.facing_ego.push(&r.facing_ego)?;
+                tp.facing_team.push(&r.facing_team)?;
                 if let (Some(em), Some(lg)) = (tp.embedding.as_mut(), tp.gcn_logits.as_mut()) {
                     em.push(&r.embedding)?;
                     lg.push(&r.logits)?;
@@ -328,7 +348,15 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     }
     sp.episode.finish()?;
     sp.tick.finish()?;
-    for w in [tp.keypoints, tp.relations_ego, tp.relations_team, tp.relations_heard, tp.relations_peers] {
+    for w in [
+        tp.keypoints,
+        tp.relations_ego,
+        tp.relations_team,
+        tp.relations_heard,
+        tp.relations_peers,
+        tp.facing_ego,
+        tp.facing_team,
+    ] {
         w.finish()?;
     }
     for w in [tp.seen, tp.truth, tp.phase, tp.split, tp.robot] {
@@ -386,6 +414,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 "relations_team": ["float32", ["rows", RELATION_DIM], "the same from the team's fused track and shared map, every robot of the episode a peer"],
                 "relations_heard": ["float32", ["rows", RELATION_DIM], format!("the same when the robot hears a random subset of the others (drawn per episode and robot: how many uniform in 0..robots-1, then which), each of their messages lost with probability {HEARD_LOSS}")],
                 "relations_peers": ["float32", ["rows", PEER_SLOTS, RELATION_DIM], "one relation block per peer heard in relations_heard: that peer's own estimate against the robot's team map; empty slots zero (floor::peer_set)"],
+                "facing_ego": ["float32", ["rows", FACING_DIM], "where the worker's body faces (from the robot's own keypoints) against the stations of its own map, from its own track (agent/src/floor/relations.rs, facing)"],
+                "facing_team": ["float32", ["rows", FACING_DIM], "the same against the team's fused track and shared map"],
                 "embedding": ["float32", ["rows", EMBEDDING_DIM], "GCN embedding of the worker node (only with --gcn; zeros when not seen)"],
                 "gcn_logits": ["float32", ["rows", NUM_CLASSES], "GCN logits (only with --gcn; zeros when not seen)"],
                 "human_feature": ["float32", ["rows", NODE_FEATURE_DIM], "the worker node's feature, global ‖ local (only with --human-features; zeros when not seen)"],

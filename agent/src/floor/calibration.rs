@@ -17,6 +17,12 @@ const PIXEL_SIGMA: f32 = 3.0;
 /// Error that does not shrink with distance: where on its footprint a box bottom lies,
 /// how the ankles sit under the body (m).
 const BASE_SIGMA: f32 = 0.15;
+/// Shoulder and hip width, the ears' spacing and how far the nose reaches in front of
+/// the ears, of an average adult (m): [`CameraCalibration::worker_facing`].
+const SHOULDERS_M: f32 = 0.40;
+const HIPS_M: f32 = 0.24;
+const EARS_M: f32 = 0.16;
+const NOSE_REACH_M: f32 = 0.10;
 /// Objects seen farther than this are not put on the map (m).
 const LANDMARK_RANGE: f32 = 15.0;
 /// Below this detector score an object is not put on the map.
@@ -112,6 +118,32 @@ impl CameraCalibration {
         }
         let mid = ((ankles[0].0 + ankles[1].0) / 2.0, (ankles[0].1 + ankles[1].1) / 2.0);
         self.back_project(pose, mid, ANKLE_HEIGHT)
+    }
+
+    /// Which way the worker's body faces on the floor (radians, floor frame), from its
+    /// keypoints: `None` when the ankles are out of the image.
+    ///
+    /// A monocular view measures well how far apart the keypoints lie across the line
+    /// of sight (the range of the whole body comes from its ankles) and their depth
+    /// differences not at all. Across the line of sight, the shoulders and the hips
+    /// span their width times the cosine of the body's angle to that line; the nose
+    /// lies off the ears' midpoint by its reach times the sine of the head's angle,
+    /// whose sign tells which of the two body angles with that cosine it is (a head
+    /// turned by ψ can pick the mirror image of a body angle within ψ of the line of
+    /// sight). Widths of an average adult.
+    pub fn worker_facing(&self, pose: &FloorPose, keypoints: &[f32]) -> Option<f32> {
+        debug_assert_eq!(keypoints.len(), KEYPOINT_VALUES);
+        let (at, _) = self.worker_on_floor(pose, keypoints)?;
+        let to = [at[0] - pose.position[0], at[1] - pose.position[1]];
+        let range = to[0].hypot(to[1]);
+        // Metres to the left of the line of sight (up to a shift common to all points).
+        let across = |k: usize| range * (self.image[0] as f32 / 2.0 - keypoints[2 * k]).atan2(self.focal());
+        let span = |l: usize, r: usize| across(r) - across(l); // − width × cos(angle)
+        let body_cos = -(SHOULDERS_M * span(5, 6) + HIPS_M * span(11, 12)) / (SHOULDERS_M.powi(2) + HIPS_M.powi(2));
+        let head_cos = -span(3, 4) / EARS_M;
+        let head_sin = (across(0) - (across(3) + across(4)) / 2.0) / NOSE_REACH_M;
+        let body = body_cos.clamp(-1.0, 1.0).acos().copysign(head_sin.atan2(head_cos));
+        Some(to[1].atan2(to[0]) + body)
     }
 
     /// The detected objects that mark one station, on the floor: the middle of each

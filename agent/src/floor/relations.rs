@@ -9,6 +9,13 @@
 //! sin bearing]`. Absent parts are zeros; the bearing is zero below
 //! [`MOVING`] (a standing worker has no direction).
 //!
+//! A set whose rows also read where the worker faces (`"row": "relations_facing"` in
+//! its manifest) gets a second block per row ([`facing`], [`FACING_DIM`] values):
+//! `[facing known]`, then per station `[cos, sin]` of its bearing relative to where the
+//! worker's body faces. A person turns to where they go before the walk shows it: in
+//! the tick they commit to a new goal their body faces its way, while a track needs a
+//! few noisy positions to find the new direction.
+//!
 //! A set that fuses its peers with a learned set model (`peer_slots` in its manifest)
 //! also reads one such block per peer ([`peer_set`]): the relations of that peer's own
 //! estimate of the worker to the robot's team map. Its track values carry the peer's
@@ -23,6 +30,8 @@ pub const PER_STATION: usize = 6;
 pub const TRACK_VALUES: usize = 3;
 /// Width of the relation block of a temporal row.
 pub const RELATION_DIM: usize = TRACK_VALUES + NUM_CLASSES * PER_STATION;
+/// Width of the facing block of a temporal row.
+pub const FACING_DIM: usize = 1 + NUM_CLASSES * 2;
 /// Below this speed (m/s) the worker has no direction of motion.
 pub const MOVING: f32 = 0.2;
 
@@ -51,6 +60,30 @@ pub fn relations(worker: Option<&WorkerEstimate>, stations: &[Option<[f32; 2]>; 
             let (c, sn) = ((u[0] * v[0] + u[1] * v[1]) / speed, (v[0] * u[1] - v[1] * u[0]) / speed);
             o[4] = c;
             o[5] = sn;
+        }
+    }
+}
+
+/// The facing block: where the worker at `worker` faces (`facing`, radians, floor
+/// frame) against the stations of a map, into `out` (length [`FACING_DIM`]); zeros
+/// when either is unknown, and for the stations not mapped.
+pub fn facing(
+    worker: Option<&WorkerEstimate>,
+    facing: Option<f32>,
+    stations: &[Option<[f32; 2]>; NUM_CLASSES],
+    out: &mut [f32],
+) {
+    assert_eq!(out.len(), FACING_DIM);
+    out.fill(0.0);
+    let (Some(w), Some(facing)) = (worker, facing) else { return };
+    out[0] = 1.0;
+    for (s, at) in stations.iter().enumerate() {
+        let Some(at) = at else { continue };
+        let d = [at[0] - w.position[0], at[1] - w.position[1]];
+        if d[0].hypot(d[1]) > 1e-3 {
+            let relative = d[1].atan2(d[0]) - facing;
+            out[1 + 2 * s] = relative.cos();
+            out[2 + 2 * s] = relative.sin();
         }
     }
 }
@@ -100,6 +133,26 @@ mod tests {
         assert_eq!(a, b);
         relations(None, &[Some([4.0, 6.0]), None, None, None], &mut a);
         assert!(a.iter().all(|&x| x == 0.0), "no track: zeros");
+    }
+
+    #[test]
+    fn the_station_the_worker_faces_is_ahead_whatever_the_floor() {
+        let stations = [Some([3.0, 4.0]), None, Some([-1.0, 4.0]), Some([0.0, -5.0])];
+        let still = walker([0.0, 4.0], [0.0, 0.0]); // standing: no direction of motion
+        let mut out = [0.0; FACING_DIM];
+        facing(Some(&still), Some(0.0), &stations, &mut out); // facing east
+        assert_eq!(out[0], 1.0);
+        assert!((out[1] - 1.0).abs() < 1e-6 && out[2].abs() < 1e-6, "station 0 straight ahead: {out:?}");
+        assert_eq!(&out[3..5], &[0.0, 0.0], "unmapped station: zeros");
+        assert!((out[5] + 1.0).abs() < 1e-6, "station 2 behind");
+        assert!(out[7].abs() < 1e-6 && (out[8] + 1.0).abs() < 1e-6, "station 3 to the right");
+        // The same scene moved and turned a quarter: the same values.
+        let turned = [Some([-4.0, 13.0]), None, Some([-4.0, 9.0]), Some([5.0, 10.0])];
+        let mut moved = [0.0; FACING_DIM];
+        facing(Some(&walker([-4.0, 10.0], [0.0, 0.0])), Some(std::f32::consts::FRAC_PI_2), &turned, &mut moved);
+        assert!(out.iter().zip(&moved).all(|(a, b)| (a - b).abs() < 1e-5), "{out:?} vs {moved:?}");
+        facing(Some(&still), None, &stations, &mut out);
+        assert!(out.iter().all(|&x| x == 0.0), "facing unknown: zeros");
     }
 
     #[test]

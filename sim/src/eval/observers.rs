@@ -7,7 +7,7 @@
 
 use super::cvm::{Cvm, HEAD_HEIGHT};
 use anyhow::Result;
-use spwi_agent::floor::{self, CameraCalibration, FloorView, RELATION_DIM};
+use spwi_agent::floor::{self, CameraCalibration, FloorView, FACING_DIM, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Inference, Input, ModelSet, Runner};
@@ -54,6 +54,8 @@ pub struct Observers {
     camera: CameraCalibration,
     row_layout: RowLayout,
     keypoints: Option<Vec<f32>>,
+    /// Where this tick's frame shows the worker facing, for rows with facing.
+    facing: Option<f32>,
     scratch: Vec<f32>,
     window: usize,
     frames: usize,
@@ -78,6 +80,7 @@ impl Observers {
             camera,
             row_layout: m.row,
             keypoints: None,
+            facing: None,
             scratch: Vec::new(),
             window: m.window,
             frames: m.frames(),
@@ -90,6 +93,10 @@ impl Observers {
     pub fn see(&mut self, frame: &DetectionFrame) {
         let t = frame.tick;
         self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
+        self.facing = match (self.row_layout, &frame.pose, &frame.human) {
+            (RowLayout::RelationsFacing, Some(pose), Some(h)) => self.camera.worker_facing(pose, &h.keypoints),
+            _ => None,
+        };
         if self.cnn1d.is_some() {
             if let Some(g) = self.graph.build(frame) {
                 let mut row = g.x[..NODE_FEATURE_DIM].to_vec(); // node 0: the worker
@@ -116,12 +123,19 @@ impl Observers {
         station_spots: &[[f32; 2]],
     ) -> Result<Predictions> {
         let seen = embedding.is_some();
-        let relations = (self.row_layout == RowLayout::Relations).then(|| {
+        let (worker, stations) = (floor_view.own_estimate(t), floor_view.own_map.stations());
+        let relations = self.row_layout.reads_relations().then(|| {
             let mut r = vec![0.0; RELATION_DIM];
-            floor::relations(floor_view.own_estimate(t).as_ref(), &floor_view.own_map.stations(), &mut r);
+            floor::relations(worker.as_ref(), &stations, &mut r);
             r
         });
-        self.ego_rows.insert(t, Row { own: embedding, keypoints: self.keypoints.take(), relations, ..Row::default() });
+        let facing = (self.row_layout == RowLayout::RelationsFacing).then(|| {
+            let mut r = vec![0.0; FACING_DIM];
+            floor::facing(worker.as_ref(), self.facing.take(), &stations, &mut r);
+            r
+        });
+        let row = Row { own: embedding, keypoints: self.keypoints.take(), relations, facing, ..Row::default() };
+        self.ego_rows.insert(t, row);
         let mut out = Predictions::default();
         if !seen {
             return Ok(out);

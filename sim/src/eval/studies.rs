@@ -41,10 +41,10 @@ pub struct Studies {
     /// Scenario 3, 3 robots, default set: the study floors (held-out episodes), held-out
     /// generated floors, the default floor with two stations swapped, and mirrored.
     pub generalisation: Vec<Report>,
-    /// Scenario 3 on the held-out generated floors: the paper's design (`models/paper`)
-    /// and our peer set (`models/peer-set`) against ours (`models/default`), trained on
-    /// the same data, with fixed cameras and
-    /// with cameras that track the worker; ours with 1 to 4 robots under tracking.
+    /// Scenario 3 on the held-out generated floors: the paper's design (`models/paper`),
+    /// our peer set (`models/peer-set`) and facing rows (`models/facing`) against ours
+    /// (`models/default`), trained on the same data, with fixed cameras and with
+    /// cameras that track the worker; ours with 1 to 4 robots under tracking.
     pub designs: Vec<Report>,
     /// The default set with station maps warm ([`WARM_MAP_S`]): held-out floors with
     /// fixed cameras and with tracking cameras (1 to 4 robots), the built-in floor,
@@ -58,7 +58,7 @@ pub const WARM_MAP_S: u32 = 60;
 
 /// The other designs shipped beside `models/default`, trained on the same data,
 /// compared with it on the held-out floors when present.
-pub const OTHER_DESIGNS: [&str; 2] = ["paper", "peer-set"];
+pub const OTHER_DESIGNS: [&str; 3] = ["paper", "peer-set", "facing"];
 
 /// Held-out generated floors of the generalisation study.
 pub const HELDOUT_FLOORS: &str = "heldout:0..50";
@@ -535,7 +535,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         );
         let _ = writeln!(
             w,
-            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `default`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `agent/src/floor/`), and votes from the track while it is fresh. `peer-set`: the default's rows, and a collective GRU that also pools one relation block per peer it heard (each peer's own estimate of the worker against the team map; DeepSets over 0–7 peers, `models/README.md`). CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
+            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `default`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `agent/src/floor/`), and votes from the track while it is fresh. `peer-set`: the default's rows, and a collective GRU that also pools one relation block per peer it heard (each peer's own estimate of the worker against the team map; DeepSets over 0–7 peers, `models/README.md`). `facing`: the default's rows, each followed by where the worker's body faces (from the robot's own keypoints) against every station. CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
         );
         let _ = writeln!(
             w,
