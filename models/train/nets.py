@@ -169,6 +169,6 @@ class FacingScorer(StationScorer):
 
     def forward(self, x):
         rows = self.station_rows(x[..., : KEYPOINTS + RELATIONS])
-        face = x[..., KEYPOINTS + RELATIONS :]
+        face = x[..., KEYPOINTS + RELATIONS : KEYPOINTS + RELATIONS + FACING]
         known = face[..., 0:1]
         return self.score([torch.cat([row, known, face[..., 1 + 2 * k : 3 + 2 * k]], -1) for k, row in enumerate(rows)])

@@ -135,8 +135,8 @@ def reference_window(s, a, kind):
     """The golden test's input: the first test window of export `s` that shows what
     the model reads — for relation rows two or more stations mapped on its last row,
     with facing the worker's facing known on it, and for a peer set two or more peers
-    heard on it (an episode's first windows have
-    empty maps and would leave those parts of the model untested)."""
+    heard on it (an episode's first windows have empty maps and would leave those
+    parts of the model untested)."""
     e, t, r = s.ends("test")
     for i in range(0, len(e), 512):
         x, _ = batch(s, e[i : i + 512], t[i : i + 512], r[i : i + 512], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing)
