@@ -46,7 +46,7 @@
 
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
-use crate::floor::{self, CameraCalibration, FloorView, StationMap, FACING_DIM, RELATION_DIM};
+use crate::floor::{self, CameraCalibration, FloorView, StationMap, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
@@ -678,16 +678,7 @@ impl Engine {
             TemporalModel::Ego => (own.worker.as_ref(), self.floor.own_map.stations()),
             TemporalModel::Collective => (team_worker.as_ref(), self.floor.team_map.stations()),
         };
-        let relations = self.row_layout.reads_relations().then(|| {
-            let mut r = vec![0.0; RELATION_DIM];
-            floor::relations(worker, &stations, &mut r);
-            r
-        });
-        let facing = (self.row_layout == RowLayout::RelationsFacing).then(|| {
-            let mut r = vec![0.0; FACING_DIM];
-            floor::facing(worker, own.facing, &stations, &mut r);
-            r
-        });
+        let (relations, facing) = self.row_layout.blocks(worker, own.facing, &stations);
         let peers = (slots > 0).then(|| {
             let mut p = vec![0.0; slots * RELATION_DIM];
             floor::peer_set(&fused_peers, &self.floor.team_map.stations(), slots, &mut p);

@@ -20,8 +20,8 @@
 //! picked tick, one relation block per peer heard ([`crate::floor::peer_set`]): its
 //! second input, `[frames, slots, RELATION_DIM]` ([`Window::peer_input`]).
 
-use crate::floor::{FACING_DIM, RELATION_DIM};
-use spwi_proto::{EMBEDDING_DIM, KEYPOINT_VALUES};
+use crate::floor::{self, FACING_DIM, RELATION_DIM};
+use spwi_proto::{WorkerEstimate, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
 use std::collections::BTreeMap;
 
 /// Width of one ego-GRU row of the paper: own embedding ‖ keypoints.
@@ -48,6 +48,27 @@ impl RowLayout {
     /// Rows of keypoints and relations (with or without facing): no embedding.
     pub fn reads_relations(self) -> bool {
         matches!(self, RowLayout::Relations | RowLayout::RelationsFacing)
+    }
+
+    /// The relation and facing blocks of a row of this layout (`None` for the parts
+    /// it does not read): `worker` and where its body faces against `stations`.
+    pub fn blocks(
+        self,
+        worker: Option<&WorkerEstimate>,
+        facing: Option<f32>,
+        stations: &[Option<[f32; 2]>; NUM_CLASSES],
+    ) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
+        let relations = self.reads_relations().then(|| {
+            let mut r = vec![0.0; RELATION_DIM];
+            floor::relations(worker, stations, &mut r);
+            r
+        });
+        let facing = (self == RowLayout::RelationsFacing).then(|| {
+            let mut f = vec![0.0; FACING_DIM];
+            floor::facing(worker, facing, stations, &mut f);
+            f
+        });
+        (relations, facing)
     }
 }
 
@@ -325,6 +346,19 @@ mod tests {
         assert!(out[KEYPOINT_VALUES..d].iter().all(|&v| v == 100.0));
         assert!(out[d..d + KEYPOINT_VALUES].iter().all(|&v| v == 0.2));
         assert!(out[d + KEYPOINT_VALUES..].iter().all(|&v| v == 0.0), "no relations: zeros");
+    }
+
+    #[test]
+    fn each_layout_gets_the_blocks_it_reads() {
+        let w = WorkerEstimate { position: [0.0, 0.0], velocity: [1.0, 0.0], covariance: [0.04, 0.0, 0.04] };
+        let stations = [Some([5.0, 0.0]), None, None, None];
+        let blocks = |layout: RowLayout| layout.blocks(Some(&w), Some(0.0), &stations);
+        assert_eq!(blocks(RowLayout::Paper), (None, None));
+        let (r, f) = blocks(RowLayout::Relations);
+        assert!(r.is_some_and(|r| r.len() == RELATION_DIM && r[0] == 1.0) && f.is_none());
+        let (r, f) = blocks(RowLayout::RelationsFacing);
+        assert!(r.is_some_and(|r| r[0] == 1.0));
+        assert_eq!(f.unwrap()[..3], [1.0, 1.0, 0.0], "facing known, station 0 straight ahead");
     }
 
     #[test]

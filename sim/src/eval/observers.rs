@@ -7,7 +7,7 @@
 
 use super::cvm::{Cvm, HEAD_HEIGHT};
 use anyhow::Result;
-use spwi_agent::floor::{self, CameraCalibration, FloorView, FACING_DIM, RELATION_DIM};
+use spwi_agent::floor::{CameraCalibration, FloorView};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Inference, Input, ModelSet, Runner};
@@ -124,16 +124,7 @@ impl Observers {
     ) -> Result<Predictions> {
         let seen = embedding.is_some();
         let (worker, stations) = (floor_view.own_estimate(t), floor_view.own_map.stations());
-        let relations = self.row_layout.reads_relations().then(|| {
-            let mut r = vec![0.0; RELATION_DIM];
-            floor::relations(worker.as_ref(), &stations, &mut r);
-            r
-        });
-        let facing = (self.row_layout == RowLayout::RelationsFacing).then(|| {
-            let mut r = vec![0.0; FACING_DIM];
-            floor::facing(worker.as_ref(), self.facing.take(), &stations, &mut r);
-            r
-        });
+        let (relations, facing) = self.row_layout.blocks(worker.as_ref(), self.facing.take(), &stations);
         let row = Row { own: embedding, keypoints: self.keypoints.take(), relations, facing, ..Row::default() };
         self.ego_rows.insert(t, row);
         let mut out = Predictions::default();
