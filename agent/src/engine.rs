@@ -473,10 +473,8 @@ impl Engine {
         let visibility = f.visibility();
         let quality = vote::view_quality(&f);
         let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
-        let facing = match (self.row_layout, f.pose, &f.human) {
-            (RowLayout::RelationsFacing, Some(pose), Some(h)) => self.floor.camera().worker_facing(&pose, &h.keypoints),
-            _ => None,
-        };
+        let facing =
+            (self.row_layout == RowLayout::RelationsFacing).then(|| self.floor.camera().facing_in(&f)).flatten();
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
         let will_vote = embedding.is_some() || (self.row_layout.reads_relations() && worker.is_some());

@@ -216,10 +216,6 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
         let camera = crate::calibration::of(&floor.camera);
         let mut team_floor = TeamFloor::new(camera.clone(), o.robots);
-        let facing_of = |frame: &DetectionFrame| {
-            let (pose, h) = (frame.pose.as_ref()?, frame.human.as_ref()?);
-            camera.worker_facing(pose, &h.keypoints)
-        };
         // The same fleet as each robot holds it when it hears only some peers, some
         // of their messages lost: who hears whom is drawn once per episode.
         let mut heard_floor = TeamFloor::new(camera.clone(), o.robots);
@@ -290,7 +286,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 let (own_stations, team_stations) = (v.own_map.stations(), v.team_map.stations());
                 floor::relations(own[slot].as_ref(), &own_stations, &mut row.relations_ego);
                 floor::relations(team.as_ref(), &team_stations, &mut row.relations_team);
-                let facing = facing_of(&frames[slot]);
+                let facing = camera.facing_in(&frames[slot]);
                 floor::facing(own[slot].as_ref(), facing, &own_stations, &mut row.facing_ego);
                 floor::facing(team.as_ref(), facing, &team_stations, &mut row.facing_team);
             }

@@ -8,7 +8,7 @@
 //! comes with a standard deviation that grows with it.
 
 use serde::{Deserialize, Serialize};
-use spwi_proto::{FloorPose, Landmark, ObjectClass, ObjectDetection, KEYPOINT_VALUES};
+use spwi_proto::{DetectionFrame, FloorPose, Landmark, ObjectClass, ObjectDetection, KEYPOINT_VALUES};
 
 /// Height of the ankle keypoints above the floor (m): COCO's ankles of a standing adult.
 pub const ANKLE_HEIGHT: f32 = 0.08;
@@ -144,6 +144,12 @@ impl CameraCalibration {
         let head_sin = (across(0) - (across(3) + across(4)) / 2.0) / NOSE_REACH_M;
         let body = body_cos.clamp(-1.0, 1.0).acos().copysign(head_sin.atan2(head_cos));
         Some(to[1].atan2(to[0]) + body)
+    }
+
+    /// [`Self::worker_facing`] of the worker a frame shows, if the frame carries its
+    /// robot's pose.
+    pub fn facing_in(&self, frame: &DetectionFrame) -> Option<f32> {
+        self.worker_facing(frame.pose.as_ref()?, &frame.human.as_ref()?.keypoints)
     }
 
     /// The detected objects that mark one station, on the floor: the middle of each

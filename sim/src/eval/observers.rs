@@ -93,10 +93,7 @@ impl Observers {
     pub fn see(&mut self, frame: &DetectionFrame) {
         let t = frame.tick;
         self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
-        self.facing = match (self.row_layout, &frame.pose, &frame.human) {
-            (RowLayout::RelationsFacing, Some(pose), Some(h)) => self.camera.worker_facing(pose, &h.keypoints),
-            _ => None,
-        };
+        self.facing = (self.row_layout == RowLayout::RelationsFacing).then(|| self.camera.facing_in(frame)).flatten();
         if self.cnn1d.is_some() {
             if let Some(g) = self.graph.build(frame) {
                 let mut row = g.x[..NODE_FEATURE_DIM].to_vec(); // node 0: the worker
