@@ -7,10 +7,11 @@
 #      agent's own Rust code computes from that exported GCN;
 #   4. train_temporal.py per model set: ego-GRU, collective-GRU (and the 1D-CNN baseline
 #      for the default set), temperature scaling, export, checks, manifest. `paper` is
-#      the paper's design (rows: embeddings and keypoints); `default` adds the worker's
-#      relations to the mapped stations (agent/src/floor/); `peer-set` also pools one
-#      relation block per peer heard in its collective GRU; `facing` also reads where
-#      the worker's body faces against each station; all share the GCN and data.
+#      the paper's design (rows: embeddings and keypoints); `relations` adds the
+#      worker's relations to the mapped stations (agent/src/floor/); `default` also
+#      reads where the worker's body faces against each station; `peer-set` is
+#      `relations` that pools one relation block per peer heard in its collective GRU;
+#      all share the GCN and data.
 #
 # Usage: models/train.sh            (all sets; see models/README.md for the time)
 #        SETS="default" models/train.sh
@@ -27,7 +28,7 @@ cd "$(dirname "$0")/.."
 EPISODES="${EPISODES:-300}"
 SEED="${SEED:-1}"
 LAYOUTS="${LAYOUTS:-train:0..300}"
-SETS="${SETS:-paper default peer-set facing w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
+SETS="${SETS:-paper default relations peer-set w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
 VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
 DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
 OUT="$(realpath -m "${MODELS_OUT:-models}")"
@@ -96,10 +97,10 @@ step "stage 2: temporal models"
 for set in $SETS; do
   case "$set" in
     paper)      args=(--window 20 --horizon 20) ;;
-    default)    args=(--window 20 --horizon 20 --relations --cnn1d) ;;
+    default)    args=(--window 20 --horizon 20 --relations --facing --cnn1d) ;;
+    relations)  args=(--window 20 --horizon 20 --relations) ;;
     peer-set)   args=(--window 20 --horizon 20 --relations --peer-set) ;;
-    facing)     args=(--window 20 --horizon 20 --relations --facing) ;;
-    # The study sets: the default's design, other windows and frame counts.
+    # The study sets: the relations design, other windows and frame counts.
     w10-h10)    args=(--window 10 --horizon 10 --relations) ;;
     w30-h30)    args=(--window 30 --horizon 30 --relations) ;;
     w10-h10-f5) args=(--window 10 --horizon 10 --frames 5 --relations) ;;

@@ -1135,9 +1135,9 @@ pub(crate) mod tests {
 
     #[test]
     fn a_relation_set_votes_from_a_fresh_track_and_says_so() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/relations");
         let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
-        assert_eq!(set.manifest.row, RowLayout::Relations, "the shipped default set reads relation rows");
+        assert_eq!(set.manifest.row, RowLayout::Relations, "the shipped relations set reads relation rows");
         let mut a = engine("a", &set);
         let localised = |tick, seen| DetectionFrame {
             pose: Some(FloorPose { position: [1.0, 2.0], heading: 0.5 }),
@@ -1174,7 +1174,7 @@ pub(crate) mod tests {
 
     #[test]
     fn a_facing_set_reads_where_its_own_frame_shows_the_worker_facing() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/facing");
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
         let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
         assert_eq!(set.manifest.row, RowLayout::RelationsFacing);
         let mut a = engine("a", &set);

@@ -158,7 +158,7 @@ fn copy_of(set: &str, tag: &str) -> PathBuf {
 #[test]
 fn a_set_whose_collective_cannot_take_the_peer_input_is_refused_naming_it() {
     // A relation set whose manifest claims a peer set its collective GRU does not read.
-    let dir = copy_of("default", "peers");
+    let dir = copy_of("relations", "peers");
     let edit = |f: &dyn Fn(&mut serde_json::Value)| {
         let mut m: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();

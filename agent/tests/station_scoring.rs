@@ -28,10 +28,10 @@ fn reorder_stations(x: &[f32], row_dim: usize, order: [usize; NUM_CLASSES]) -> V
 }
 
 #[test]
-fn reordering_the_stations_reorders_the_default_sets_logits() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
+fn reordering_the_stations_reorders_the_relation_sets_logits() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/relations");
     let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
-    assert_eq!(set.manifest.row, RowLayout::Relations, "the default set reads relation rows");
+    assert_eq!(set.manifest.row, RowLayout::Relations, "the relations set reads relation rows");
     let reference: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
     let order = [2, 0, 3, 1];
