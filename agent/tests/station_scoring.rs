@@ -1,6 +1,7 @@
-//! The shipped relation set scores stations, not class slots: each station is judged by
-//! its own relation to the worker, through one network shared by all stations (the
-//! `StationScorer` of models/train/nets.py). So if the stations of every row are
+//! The shipped relation sets score stations, not class slots: each station is judged by
+//! its own relation to the worker (and, in the default set, by where the worker faces
+//! against it), through one network shared by all stations (the `StationScorer` and
+//! `FacingScorer` of models/train/nets.py). So if the stations of every row are
 //! handed over in another order, the logits come back in that order, to float
 //! precision. A model that learned "slot 2 on the training floors" fails this test.
 //! Likewise a set that pools its peers (`peer_slots`) must not care which slot holds
@@ -9,19 +10,27 @@
 use spwi_agent::floor::relations::{PER_STATION, TRACK_VALUES};
 use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Backend, Input, ModelSet};
-use spwi_agent::temporal::RowLayout;
+use spwi_agent::temporal::{RowLayout, TemporalModel, RELATION_ROW_DIM};
 use spwi_proto::{KEYPOINT_VALUES, NUM_CLASSES};
 use std::path::Path;
 
-/// The stations of every row of `x` (rows of `row_dim`) reordered: slot `k` of the
-/// result holds station `order[k]`.
-fn reorder_stations(x: &[f32], row_dim: usize, order: [usize; NUM_CLASSES]) -> Vec<f32> {
-    let first = KEYPOINT_VALUES + TRACK_VALUES;
+/// The stations of every row of `x` (rows of `layout`) reordered: slot `k` of the
+/// result holds station `order[k]`, in the relation block and in the facing block
+/// (its flag, then a cosine and a sine per station) where the rows have one.
+fn reorder_stations(x: &[f32], layout: RowLayout, order: [usize; NUM_CLASSES]) -> Vec<f32> {
+    // Relation rows are the same for the ego and the collective model.
+    let row_dim = TemporalModel::Collective.row_dim(layout);
+    let mut blocks = vec![(KEYPOINT_VALUES + TRACK_VALUES, PER_STATION)];
+    if layout == RowLayout::RelationsFacing {
+        blocks.push((RELATION_ROW_DIM + 1, 2));
+    }
     let mut out = x.to_vec();
     for (row_in, row_out) in x.chunks_exact(row_dim).zip(out.chunks_exact_mut(row_dim)) {
-        for (k, &from) in order.iter().enumerate() {
-            let (src, dst) = (first + from * PER_STATION, first + k * PER_STATION);
-            row_out[dst..dst + PER_STATION].copy_from_slice(&row_in[src..src + PER_STATION]);
+        for &(first, width) in &blocks {
+            for (k, &from) in order.iter().enumerate() {
+                let (src, dst) = (first + from * width, first + k * width);
+                row_out[dst..dst + width].copy_from_slice(&row_in[src..src + width]);
+            }
         }
     }
     out
@@ -29,9 +38,15 @@ fn reorder_stations(x: &[f32], row_dim: usize, order: [usize; NUM_CLASSES]) -> V
 
 #[test]
 fn reordering_the_stations_reorders_the_relation_sets_logits() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/relations");
+    for (name, layout) in [("relations", RowLayout::Relations), ("default", RowLayout::RelationsFacing)] {
+        reordering_the_stations_reorders_the_logits_of(name, layout);
+    }
+}
+
+fn reordering_the_stations_reorders_the_logits_of(set_name: &str, layout: RowLayout) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models").join(set_name);
     let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
-    assert_eq!(set.manifest.row, RowLayout::Relations, "the relations set reads relation rows");
+    assert_eq!(set.manifest.row, layout, "{set_name}: its rows");
     let reference: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("reference.json")).unwrap()).unwrap();
     let order = [2, 0, 3, 1];
@@ -48,25 +63,26 @@ fn reordering_the_stations_reorders_the_relation_sets_logits() {
             |x: &[f32], s: usize| x[shape[2] * (shape[1] - 1) + KEYPOINT_VALUES + TRACK_VALUES + s * PER_STATION];
         assert!(
             (0..NUM_CLASSES).filter(|&s| known(&x, s) > 0.0).count() >= 2,
-            "{name}: the reference window should map at least two stations"
+            "{set_name} {name}: the reference window should map at least two stations"
         );
         let mut runner = set.runner(name).unwrap();
         let mut logits = |x: &[f32]| runner.run(&[Input { shape, data: x }]).unwrap().remove(0);
         let plain = logits(&x);
-        let reordered = logits(&reorder_stations(&x, shape[2], order));
+        assert_eq!(shape[2], TemporalModel::Collective.row_dim(layout), "{set_name} {name}: a row's width");
+        let reordered = logits(&reorder_stations(&x, layout, order));
         let mut differs = false;
         for (step, (p, r)) in plain.chunks_exact(NUM_CLASSES).zip(reordered.chunks_exact(NUM_CLASSES)).enumerate() {
             for (k, &from) in order.iter().enumerate() {
                 assert!(
                     (r[k] - p[from]).abs() < 1e-4,
-                    "{name} step {step}: slot {k} {} vs station {from} {}",
+                    "{set_name} {name} step {step}: slot {k} {} vs station {from} {}",
                     r[k],
                     p[from]
                 );
                 differs |= (r[k] - p[k]).abs() > 1e-3;
             }
         }
-        assert!(differs, "{name}: the stations' scores should differ, or the test shows nothing");
+        assert!(differs, "{set_name} {name}: the stations' scores should differ, or the test shows nothing");
     }
 }
 
