@@ -590,6 +590,17 @@ mod tests {
         let rows: Vec<&str> = page.lines().filter(|l| l.starts_with("| test | 3 |")).collect();
         assert_eq!(rows.len(), 2, "{page}");
         assert!(rows[0].contains("| empty |") && rows[1].contains("| warm, 30 s |"), "{rows:?}");
+
+        // Run on the held-out floors, the page reads the targets off both.
+        let mut st = st;
+        for r in st.generalisation.iter_mut().chain(st.warm_maps.iter_mut()) {
+            r.floors = format!("{}, Fixed cameras", studies::HELDOUT_FLOORS);
+        }
+        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        for maps in ["empty", "warm, 30 s"] {
+            let row = format!("| collective − CVM at t | ≥ +10 pts | {maps} |");
+            assert!(page.contains(&row), "no row {row:?} in\n{page}");
+        }
     }
 
     #[test]
