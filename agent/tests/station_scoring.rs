@@ -7,7 +7,7 @@
 //! Likewise a set that pools its peers (`peer_slots`) must not care which slot holds
 //! which peer.
 
-use spwi_agent::floor::relations::{PER_STATION, TRACK_VALUES};
+use spwi_agent::floor::relations::{FACING_HEAD, FACING_PER_STATION, PER_STATION, TRACK_VALUES};
 use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Backend, Input, ModelSet};
 use spwi_agent::temporal::{RowLayout, TemporalModel, RELATION_ROW_DIM};
@@ -16,13 +16,13 @@ use std::path::Path;
 
 /// The stations of every row of `x` (rows of `layout`) reordered: slot `k` of the
 /// result holds station `order[k]`, in the relation block and in the facing block
-/// (its flag, then a cosine and a sine per station) where the rows have one.
+/// where the rows have one.
 fn reorder_stations(x: &[f32], layout: RowLayout, order: [usize; NUM_CLASSES]) -> Vec<f32> {
     // Relation rows are the same for the ego and the collective model.
     let row_dim = TemporalModel::Collective.row_dim(layout);
     let mut blocks = vec![(KEYPOINT_VALUES + TRACK_VALUES, PER_STATION)];
     if layout == RowLayout::RelationsFacing {
-        blocks.push((RELATION_ROW_DIM + 1, 2));
+        blocks.push((RELATION_ROW_DIM + FACING_HEAD, FACING_PER_STATION));
     }
     let mut out = x.to_vec();
     for (row_in, row_out) in x.chunks_exact(row_dim).zip(out.chunks_exact_mut(row_dim)) {

@@ -30,8 +30,12 @@ pub const PER_STATION: usize = 6;
 pub const TRACK_VALUES: usize = 3;
 /// Width of the relation block of a temporal row.
 pub const RELATION_DIM: usize = TRACK_VALUES + NUM_CLASSES * PER_STATION;
+/// Values of the facing block before its stations' (whether the facing is known).
+pub const FACING_HEAD: usize = 1;
+/// Values per station in the facing block (cosine and sine of its bearing).
+pub const FACING_PER_STATION: usize = 2;
 /// Width of the facing block of a temporal row.
-pub const FACING_DIM: usize = 1 + NUM_CLASSES * 2;
+pub const FACING_DIM: usize = FACING_HEAD + NUM_CLASSES * FACING_PER_STATION;
 /// Below this speed (m/s) the worker has no direction of motion.
 pub const MOVING: f32 = 0.2;
 
@@ -82,8 +86,9 @@ pub fn facing(
         let d = [at[0] - w.position[0], at[1] - w.position[1]];
         if d[0].hypot(d[1]) > 1e-3 {
             let relative = d[1].atan2(d[0]) - facing;
-            out[1 + 2 * s] = relative.cos();
-            out[2 + 2 * s] = relative.sin();
+            let o = FACING_HEAD + s * FACING_PER_STATION;
+            out[o] = relative.cos();
+            out[o + 1] = relative.sin();
         }
     }
 }
