@@ -64,6 +64,12 @@ fn visible(a: P2, b: P2, rects: &[Rect]) -> bool {
     !rects.iter().any(|r| r.blocks(a, b))
 }
 
+/// Whether a walk from `from` to `to` bends around an obstacle: the straight line
+/// between them crosses one, inflated by the worker's clearance, as the worker plans.
+pub fn route_bends(from: P2, to: P2, layout: &Layout, with_obstacles: bool) -> bool {
+    !visible(from, to, &inflated(layout, with_obstacles))
+}
+
 /// The first waypoint of the shortest obstacle-free path from `from` to `to`
 /// (visibility graph over the inflated obstacles' corners, pushed out a little).
 pub fn next_waypoint(from: P2, to: P2, rects: &[Rect]) -> P2 {

@@ -16,6 +16,7 @@ use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
 use spwi_proto::{encode, RobotId, Station, WorkerPhase, NUM_CLASSES};
 use spwi_world::layout::Layout;
+use spwi_world::worker::route_bends;
 use spwi_world::world::{stream, Stream, World};
 use std::time::Duration;
 
@@ -47,6 +48,8 @@ pub struct Tallies {
     pub close_pair: ClosePair,
     /// The same, by where the tick falls in the worker's cycle ([`Phase`]).
     pub by_phase: [PhaseTallies; Phase::ALL.len()],
+    /// The long walks ([`Phase::Later`]) by the straight line to their goal ([`Route`]).
+    pub long_walks: [PhaseTallies; Route::ALL.len()],
     /// Per robot slot: gnn, ego, collective.
     pub per_robot: Vec<[Tally; 3]>,
     /// Per robot slot: the sum of the trust its votes carried, and their number.
@@ -90,7 +93,7 @@ impl Tallies {
             a.merge(b);
         }
         self.map.merge(&o.map);
-        for (a, b) in self.by_phase.iter_mut().zip(&o.by_phase) {
+        for (a, b) in self.by_phase.iter_mut().zip(&o.by_phase).chain(self.long_walks.iter_mut().zip(&o.long_walks)) {
             a.merge(b);
         }
         if self.per_robot.len() < o.per_robot.len() {
@@ -217,7 +220,58 @@ impl Phase {
     }
 }
 
-/// Ticks of one [`Phase`], and how the collective, the ego and the CVM did on them.
+/// What the straight line from the worker to its goal crosses on a walk. The CVM and
+/// the relation rows see the stations along straight lines, so a walk that passes
+/// another station on its way, or bends around an obstacle, looks like a walk
+/// elsewhere to both; splitting the long walks' ticks so says which misleads them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Route {
+    Straight,
+    PassesStation,
+    Bends,
+}
+
+/// Another station's work spot within this of the straight line to the goal, before
+/// the goal, lies on the way (m).
+const ON_THE_WAY_M: f32 = 1.5;
+
+impl Route {
+    pub const ALL: [Route; 3] = [Route::Straight, Route::PassesStation, Route::Bends];
+
+    /// The route of a worker at `at` heading for `goal`, `spots` the true work spots,
+    /// `bends` whether its straight line crosses an obstacle (that one counts first).
+    pub fn of(at: [f32; 2], goal: Station, spots: &[[f32; 2]; NUM_CLASSES], bends: bool) -> Route {
+        if bends {
+            return Route::Bends;
+        }
+        let g = spots[goal.index()];
+        let d = [g[0] - at[0], g[1] - at[1]];
+        let len = d[0].hypot(d[1]);
+        let on_the_way = |s: [f32; 2]| {
+            let r = [s[0] - at[0], s[1] - at[1]];
+            let along = (r[0] * d[0] + r[1] * d[1]) / len;
+            let aside = (r[0] * d[1] - r[1] * d[0]).abs() / len;
+            along > 0.0 && along < len && aside <= ON_THE_WAY_M
+        };
+        let passes = len > 1e-3 && Station::ALL.iter().any(|&k| k != goal && on_the_way(spots[k.index()]));
+        if passes {
+            Route::PassesStation
+        } else {
+            Route::Straight
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Route::Straight => "straight, nothing on the way",
+            Route::PassesStation => "passing another station",
+            Route::Bends => "bending around an obstacle",
+        }
+    }
+}
+
+/// Ticks of one kind (a [`Phase`], or a [`Route`] of the long walks), and how the
+/// collective, the ego and the CVM did on them.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PhaseTallies {
     pub ticks: u64,
@@ -232,6 +286,17 @@ impl PhaseTallies {
         self.collective.merge(&o.collective);
         self.ego.merge(&o.ego);
         self.cvm.merge(&o.cvm);
+    }
+
+    /// One robot's predictions of a tick of this kind.
+    fn add(&mut self, p: &Predictions, truth: &[Station]) {
+        for (tally, predicted) in
+            [(&mut self.ego, &p.ego), (&mut self.collective, &p.collective), (&mut self.cvm, &p.cvm)]
+        {
+            if let Some(predicted) = predicted {
+                tally.add(predicted, truth);
+            }
+        }
     }
 }
 
@@ -249,6 +314,7 @@ struct TickRecord {
     /// The worker heads for the farther station of a close pair.
     farther: bool,
     phase: Phase,
+    route: Route,
 }
 
 /// The daemon's own engine, with the evaluation's `[tick]` settings, for robot `slot`.
@@ -375,7 +441,10 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
         let farther = heads_for_farther(world.worker.position, world.worker.goal, &pairs, &spots);
         let phase = Phase::of(world.worker.phase == WorkerPhase::Stationary, ticks_on_goal);
-        records.push(TickRecord { per_robot, decisions, farther, phase });
+        let (at, goal) = (world.worker.position, world.worker.goal);
+        let bends = route_bends(at, spots[goal.index()], layout, o.scenario.obstacles());
+        let route = Route::of(at, goal, &spots, bends);
+        records.push(TickRecord { per_robot, decisions, farther, phase, route });
     }
 
     // Score now that the truth of every horizon is known.
@@ -384,7 +453,15 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let close = in_close_pair[truth[0].index()];
         let phase = &mut tallies.by_phase[rec.phase as usize];
         phase.ticks += 1;
+        let mut long_walk = (rec.phase == Phase::Later).then(|| &mut tallies.long_walks[rec.route as usize]);
+        if let Some(l) = long_walk.as_deref_mut() {
+            l.ticks += 1;
+        }
         for (slot, p) in &rec.per_robot {
+            phase.add(p, truth);
+            if let Some(l) = long_walk.as_deref_mut() {
+                l.add(p, truth);
+            }
             let pr = &mut tallies.per_robot[*slot];
             if let Some(g) = p.gnn {
                 tallies.gnn.add(&[g], truth);
@@ -392,7 +469,6 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(e) = &p.ego {
                 tallies.ego.add(e, truth);
-                phase.ego.add(e, truth);
                 if close {
                     tallies.close_pair.ego.add(e, truth);
                 }
@@ -401,7 +477,6 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(c) = &p.collective {
                 tallies.collective.add(c, truth);
-                phase.collective.add(c, truth);
                 if *slot >= o.faults.lying() {
                     tallies.healthy_collective.add(c, truth);
                 }
@@ -426,7 +501,6 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(c) = &p.cvm {
                 tallies.cvm.add(c, truth);
-                phase.cvm.add(c, truth);
                 if close {
                     tallies.close_pair.cvm.add(c, truth);
                 }
@@ -472,7 +546,7 @@ fn encoded_len(o: &Output) -> usize {
 
 #[cfg(test)]
 mod tests {
-    use super::{heads_for_farther, Phase};
+    use super::{heads_for_farther, Phase, Route};
     use spwi_proto::Station::*;
 
     #[test]
@@ -486,6 +560,18 @@ mod tests {
         assert_eq!(Phase::of(false, 19), Phase::OneToTwoSeconds);
         assert_eq!(Phase::of(false, 20), Phase::Later);
         assert!(Phase::ALL.iter().enumerate().all(|(k, &p)| p as usize == k), "ALL indexes the tallies");
+    }
+
+    #[test]
+    fn a_walk_passes_a_station_that_lies_on_its_straight_line_before_the_goal() {
+        let spots = [[0.0, 0.0], [10.0, 1.0], [20.0, 0.0], [5.0, 8.0]];
+        assert_eq!(Route::of([0.0, 0.0], Assembly, &spots, false), Route::PassesStation, "workstation on the way");
+        assert_eq!(Route::of([0.0, 0.0], Workstation, &spots, false), Route::Straight, "assembly lies beyond the goal");
+        assert_eq!(Route::of([0.0, 0.0], Manufacturing, &spots, false), Route::Straight, "nothing near the line");
+        assert_eq!(Route::of([30.0, 0.0], Storage, &spots, false), Route::PassesStation, "from the other side");
+        assert_eq!(Route::of([0.0, 0.0], Manufacturing, &spots, true), Route::Bends, "an obstacle counts first");
+        assert_eq!(Route::of([0.0, 0.0], Storage, &spots, false), Route::Straight, "at the goal");
+        assert!(Route::ALL.iter().enumerate().all(|(k, &r)| r as usize == k), "ALL indexes the tallies");
     }
 
     #[test]

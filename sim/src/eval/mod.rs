@@ -139,6 +139,9 @@ pub struct Report {
     /// The collective, the ego and the CVM by where the tick falls in the worker's
     /// cycle: at work, or walking so long after committing to its goal.
     pub by_phase: Vec<PhaseAccuracy>,
+    /// The same on the long walks (after 2 s), by what the straight line to the goal
+    /// crosses (`fleet::Route`); `phase` names the route, `share` is of the long walks.
+    pub long_walks: Vec<PhaseAccuracy>,
     pub per_robot: Vec<PerRobot>,
     /// Share of decided ticks on which every live robot decided the same class for t.
     pub agreement: f64,
@@ -162,11 +165,14 @@ pub struct Report {
     pub per_frame_us: f64,
 }
 
-/// The models on the ticks of one phase of the worker's cycle ([`fleet::Phase`]).
+/// The models on the ticks of one phase of the worker's cycle ([`fleet::Phase`]), or
+/// of one route of its long walks ([`fleet::Route`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct PhaseAccuracy {
+    /// The phase, or for the long walks the route (`fleet::Route`).
     pub phase: &'static str,
-    /// Share of all ticks in this phase.
+    /// Share of the ticks it is one kind of: all ticks for a phase, the long walks' for
+    /// a route.
     pub share: f64,
     pub collective: Accuracy,
     pub ego: Accuracy,
@@ -269,19 +275,19 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         close_pair.insert("collective_farther", of(&|e| &e.close_pair.farther_collective));
         close_pair.insert("cvm_farther", of(&|e| &e.close_pair.farther_cvm));
     }
-    let by_phase = fleet::Phase::ALL
-        .iter()
-        .map(|&phase| {
-            let k = phase as usize;
-            PhaseAccuracy {
-                phase: phase.name(),
-                share: all.by_phase[k].ticks as f64 / all.ticks.max(1) as f64,
-                collective: of(&|e| &e.by_phase[k].collective),
-                ego: of(&|e| &e.by_phase[k].ego),
-                cvm: of(&|e| &e.by_phase[k].cvm),
-            }
-        })
-        .collect();
+    // Ticks of one kind (`pick` finds its tallies among an episode's), `share` of `of_ticks`.
+    let kind =
+        |name: &'static str, of_ticks: u64, pick: &dyn Fn(&fleet::Tallies) -> &fleet::PhaseTallies| PhaseAccuracy {
+            phase: name,
+            share: pick(&all).ticks as f64 / of_ticks.max(1) as f64,
+            collective: of(&|e| &pick(e).collective),
+            ego: of(&|e| &pick(e).ego),
+            cvm: of(&|e| &pick(e).cvm),
+        };
+    let by_phase = fleet::Phase::ALL.iter().map(|&p| kind(p.name(), all.ticks, &|e| &e.by_phase[p as usize])).collect();
+    let long_walk_ticks = all.long_walks.iter().map(|l| l.ticks).sum();
+    let long_walks =
+        fleet::Route::ALL.iter().map(|&r| kind(r.name(), long_walk_ticks, &|e| &e.long_walks[r as usize])).collect();
     let per_robot = (0..all.per_robot.len())
         .map(|slot| {
             let model = |k: usize| of(&|e| e.per_robot.get(slot).map_or(&EMPTY, |r| &r[k]));
@@ -307,6 +313,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         models,
         close_pair,
         by_phase,
+        long_walks,
         per_robot,
         agreement: if all.decided_ticks == 0 { 0.0 } else { all.agreed_ticks as f64 / all.decided_ticks as f64 },
         coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
@@ -446,17 +453,25 @@ pub fn print(r: &Report) {
             println!("    {:<13} {:>21} {:>21}", name, ci(a), ci_future(a));
         }
     }
+    // One line per kind of tick: its share, then the collective, the ego and the CVM at t.
+    let print_kinds = |kinds: &[PhaseAccuracy]| {
+        for p in kinds {
+            println!(
+                "    {:<33} {:>5}% {:>21} {:>21} {:>21}",
+                p.phase,
+                pct(p.share),
+                ci(&p.collective),
+                ci(&p.ego),
+                ci(&p.cvm)
+            );
+        }
+    };
     println!("  by phase of the worker's cycle (share of ticks · collective · ego · CVM, at t):");
-    for p in &r.by_phase {
-        println!(
-            "    {:<33} {:>5}% {:>21} {:>21} {:>21}",
-            p.phase,
-            pct(p.share),
-            ci(&p.collective),
-            ci(&p.ego),
-            ci(&p.cvm)
-        );
-    }
+    print_kinds(&r.by_phase);
+    println!(
+        "  the long walks by what the straight line to the goal crosses (share of them · collective · ego · CVM):"
+    );
+    print_kinds(&r.long_walks);
     for p in &r.per_robot {
         println!(
             "  robot {:<4} trust {} · gnn {} · ego {} / {} · collective {} / {}",
@@ -609,6 +624,8 @@ mod tests {
         assert_eq!(r.by_phase.len(), fleet::Phase::ALL.len());
         assert!(r.by_phase.iter().all(|p| p.share > 0.0), "10 s episodes hold every phase: {:?}", r.by_phase);
         assert!((r.by_phase.iter().map(|p| p.share).sum::<f64>() - 1.0).abs() < 1e-9);
+        assert_eq!(r.long_walks.len(), fleet::Route::ALL.len());
+        assert!((r.long_walks.iter().map(|p| p.share).sum::<f64>() - 1.0).abs() < 1e-9, "{:?}", r.long_walks);
         // The worker standing at its station shows its intent; one that has just left
         // shows the station it leaves, so the constant-velocity model names that one.
         let (at_work, leaving) = (r.by_phase[0].cvm.t, r.by_phase[1].cvm.t);
