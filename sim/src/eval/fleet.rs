@@ -15,6 +15,7 @@ use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
 use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
 use spwi_proto::{encode, RobotId, Station, WorkerPhase, NUM_CLASSES};
+use spwi_world::geometry::{norm, sub};
 use spwi_world::layout::Layout;
 use spwi_world::worker::route_bends;
 use spwi_world::world::{stream, Stream, World};
@@ -244,11 +245,10 @@ impl Route {
         if bends {
             return Route::Bends;
         }
-        let g = spots[goal.index()];
-        let d = [g[0] - at[0], g[1] - at[1]];
-        let len = d[0].hypot(d[1]);
+        let d = sub(spots[goal.index()], at);
+        let len = norm(d);
         let on_the_way = |s: [f32; 2]| {
-            let r = [s[0] - at[0], s[1] - at[1]];
+            let r = sub(s, at);
             let along = (r[0] * d[0] + r[1] * d[1]) / len;
             let aside = (r[0] * d[1] - r[1] * d[0]).abs() / len;
             along > 0.0 && along < len && aside <= ON_THE_WAY_M
@@ -314,7 +314,8 @@ struct TickRecord {
     /// The worker heads for the farther station of a close pair.
     farther: bool,
     phase: Phase,
-    route: Route,
+    /// On a long walk ([`Phase::Later`]), what the straight line to the goal crosses.
+    route: Option<Route>,
 }
 
 /// The daemon's own engine, with the evaluation's `[tick]` settings, for robot `slot`.
@@ -441,9 +442,10 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
         let farther = heads_for_farther(world.worker.position, world.worker.goal, &pairs, &spots);
         let phase = Phase::of(world.worker.phase == WorkerPhase::Stationary, ticks_on_goal);
-        let (at, goal) = (world.worker.position, world.worker.goal);
-        let bends = route_bends(at, spots[goal.index()], layout, o.scenario.obstacles());
-        let route = Route::of(at, goal, &spots, bends);
+        let route = (phase == Phase::Later).then(|| {
+            let (at, goal) = (world.worker.position, world.worker.goal);
+            Route::of(at, goal, &spots, route_bends(at, spots[goal.index()], layout, o.scenario.obstacles()))
+        });
         records.push(TickRecord { per_robot, decisions, farther, phase, route });
     }
 
@@ -453,7 +455,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let close = in_close_pair[truth[0].index()];
         let phase = &mut tallies.by_phase[rec.phase as usize];
         phase.ticks += 1;
-        let mut long_walk = (rec.phase == Phase::Later).then(|| &mut tallies.long_walks[rec.route as usize]);
+        let mut long_walk = rec.route.map(|r| &mut tallies.long_walks[r as usize]);
         if let Some(l) = long_walk.as_deref_mut() {
             l.ticks += 1;
         }
