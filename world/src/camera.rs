@@ -44,8 +44,13 @@ pub fn project(cam: &Camera, pose: Pose, p: [f32; 3]) -> Option<(f32, f32)> {
 /// Bearing of a floor point from the camera, relative to its axis (radians).
 fn bearing(pose: Pose, p: P2) -> f32 {
     let d = sub(p, pose.position);
-    let a = d[1].atan2(d[0]) - pose.heading;
-    a.sin().atan2(a.cos())
+    angle_diff(d[1].atan2(d[0]), pose.heading)
+}
+
+/// Whether floor point `p` lies within the camera's range and field of view (hidden or
+/// not).
+pub fn in_view(cam: &Camera, pose: Pose, p: P2) -> bool {
+    dist(pose.position, p) <= cam.range && bearing(pose, p).abs() <= cam.fov_deg.to_radians() / 2.0
 }
 
 /// The bbox of a vertical box (footprint × height), clipped to the image; `None` when
@@ -121,8 +126,7 @@ pub fn detect(
     rng: &mut ChaCha8Rng,
 ) -> DetectionFrame {
     let cam = &scene.layout.camera;
-    let half_fov = cam.fov_deg.to_radians() / 2.0;
-    let in_view = |p: P2| dist(pose.position, p) <= cam.range && bearing(pose, p).abs() <= half_fov;
+    let in_view = |p: P2| in_view(cam, pose, p);
     let jitter = |b: BBox, rng: &mut ChaCha8Rng| {
         let s = |v: f32, rng: &mut ChaCha8Rng| (1.5 + 0.03 * v) * gauss(rng);
         BBox {

@@ -28,6 +28,11 @@ pub fn unit(a: P2) -> P2 {
     }
 }
 
+/// `a - b` wrapped to (-π, π].
+pub fn angle_diff(a: f32, b: f32) -> f32 {
+    (a - b).sin().atan2((a - b).cos())
+}
+
 /// Distance from `p` to the segment a→b.
 pub fn segment_dist(a: P2, b: P2, p: P2) -> f32 {
     let d = sub(b, a);

@@ -54,8 +54,9 @@ pub enum CameraPolicy {
     /// Along the robot's spawn heading (stationary) or over the floor (patrolling).
     #[default]
     Fixed,
-    /// Towards where the fleet last saw the worker, panning at a limited rate, and
-    /// sweeping round its home heading when nobody has seen the worker for 3 s.
+    /// Towards where the fleet last saw the worker, panning at a limited rate; while
+    /// the worker stands at a station only the nearest camera that shows it stays on
+    /// it, and cameras with nothing to follow look round the floor (`pan.rs`).
     Track,
 }
 

@@ -11,6 +11,7 @@
 //! worker.rs     the worker: plans round obstacles, avoids robots, slows to work, changes its mind
 //! skeleton.rs   17 COCO keypoints of a walking body, head turning towards the goal
 //! camera.rs     pinhole cameras and a flawed detector: boxes, occlusion, misses, noise
+//! pan.rs        where `track` pan units point: the walking worker, or round the floor
 //! appearance.rs synthetic 512-d features (class prototypes + view, distance, posture)
 //! world.rs      one tick of everything, deterministic from a seed; scenarios 1-3
 //! ```
@@ -23,6 +24,7 @@ pub mod camera;
 pub mod generate;
 pub mod geometry;
 pub mod layout;
+pub mod pan;
 pub mod skeleton;
 pub mod worker;
 pub mod world;

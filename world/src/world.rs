@@ -13,6 +13,7 @@ use crate::appearance::Appearance;
 use crate::camera::{self, DetectorState, Occluder, Pose, ROBOT_HEIGHT, ROBOT_RADIUS};
 use crate::geometry::*;
 use crate::layout::{CameraPolicy, Layout, Object};
+use crate::pan::{self, PanUnit, Sightings};
 use crate::worker::Worker;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -24,10 +25,6 @@ pub const DT: f32 = spwi_proto::TICK_PERIOD.as_secs_f32();
 const ROBOT_SPEED: f32 = 0.5;
 /// How fast a camera pans, radians per tick (≈ 115 °/s: a pan-tilt unit, not a head).
 const PAN_PER_TICK: f32 = 0.2;
-/// `track`: after this many ticks without a sighting the camera sweeps instead.
-const TRACK_MEMORY_TICKS: u64 = 30;
-/// `track`: half-width of a sweep round the robot's home heading, radians.
-const SWEEP_HALF: f32 = 1.2;
 
 /// The paper's three scenarios, in rising difficulty.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -94,6 +91,8 @@ pub struct RobotState {
     /// the floor while patrolling).
     home_heading: f32,
     next_waypoint: usize,
+    /// Under `track`: what the camera showed and where it looked.
+    pan: PanUnit,
     detector: DetectorState,
     rng: ChaCha8Rng,
 }
@@ -116,9 +115,9 @@ pub struct World {
     occluders: Vec<Occluder>,
     appearance: Appearance,
     worker_rng: ChaCha8Rng,
-    /// The worker's position and the tick when a robot of the fleet last detected it
-    /// (what `track` cameras turn to).
-    last_sighting: Option<(P2, u64)>,
+    /// Where and when robots of the fleet detected the worker (what `track` cameras
+    /// turn to).
+    sightings: Sightings,
 }
 
 impl World {
@@ -136,6 +135,7 @@ impl World {
                 pose: Pose { position: r.spawn, heading: r.heading_deg.to_radians() },
                 home_heading: r.heading_deg.to_radians(),
                 next_waypoint: 1,
+                pan: PanUnit::default(),
                 detector: DetectorState::default(),
                 rng: stream(seed, Stream::Detector(i)),
             })
@@ -150,7 +150,7 @@ impl World {
             occluders: Vec::new(),
             appearance: Appearance::new(),
             worker_rng,
-            last_sighting: None,
+            sightings: Sightings::default(),
         };
         world.refresh_occluders();
         world
@@ -168,8 +168,12 @@ impl World {
         self.worker.step(DT, &self.layout, self.scenario.obstacles(), &robots, &mut self.worker_rng);
         let centre = scale(self.layout.floor.size, 0.5);
         let worker = self.worker.position;
-        let sighting = self.last_sighting.filter(|(_, t)| self.tick - t <= TRACK_MEMORY_TICKS).map(|(p, _)| p);
         let track = self.layout.camera.policy == CameraPolicy::Track;
+        let sighting = self.sightings.fresh(self.tick);
+        let fleet = self.robots.iter().enumerate().filter(|(_, r)| r.in_fleet);
+        let keeper =
+            pan::keeper(&self.sightings, self.tick, DT, fleet.map(|(slot, r)| (slot, r.pose.position, &r.pan)));
+        let (floor, half_fov) = (self.layout.floor.size, self.layout.camera.fov_deg.to_radians() / 2.0);
         for (slot, r) in self.robots.iter_mut().enumerate() {
             if self.scenario.moving_robots() {
                 let patrol = &self.layout.robots[slot].patrol;
@@ -188,13 +192,15 @@ impl World {
                     r.home_heading = heading_to(r.pose.position, centre);
                 }
             }
-            let want = match (track && r.in_fleet, sighting) {
-                (true, Some(p)) => heading_to(r.pose.position, p),
-                // sweep round home, a full period every ~5 s
-                (true, None) => r.home_heading + SWEEP_HALF * (self.tick as f32 * 0.125).sin(),
-                (false, _) => r.home_heading,
+            let want = match sighting {
+                _ if !(track && r.in_fleet) => r.home_heading,
+                Some(p) if keeper.is_none_or(|k| k == slot) => heading_to(r.pose.position, p),
+                _ => r.pan.look_round(r.pose.position, r.pose.heading, floor).unwrap_or(r.home_heading),
             };
             r.pose.heading += angle_diff(want, r.pose.heading).clamp(-PAN_PER_TICK, PAN_PER_TICK);
+            if track {
+                r.pan.looked_along(r.pose.heading, half_fov, self.tick);
+            }
         }
         if self.scenario.moving_robots() {
             self.refresh_occluders();
@@ -238,7 +244,8 @@ impl World {
         let r = &mut self.robots[slot];
         let frame = camera::detect(&scene, robot.clone(), self.tick, r.pose, Some(own), &mut r.detector, &mut r.rng);
         if frame.human.is_some() && r.in_fleet {
-            self.last_sighting = Some((self.worker.position, self.tick));
+            r.pan.saw_worker(self.tick);
+            self.sightings.record(self.worker.position, self.tick);
         }
         frame
     }
@@ -266,11 +273,6 @@ impl World {
 fn heading_to(from: P2, to: P2) -> f32 {
     let d = sub(to, from);
     d[1].atan2(d[0])
-}
-
-/// `a - b` wrapped to (-π, π].
-pub fn angle_diff(a: f32, b: f32) -> f32 {
-    (a - b).sin().atan2((a - b).cos())
 }
 
 #[cfg(test)]
@@ -406,6 +408,45 @@ mod tests {
             let (fixed, track) = (coverage(CameraPolicy::Fixed, n), coverage(CameraPolicy::Track, n));
             assert!(track > fixed + 0.1, "{n} robots: track {track:.2} vs fixed {fixed:.2}");
         }
+    }
+
+    /// Mean number of a fleet of 3's cameras with the worker in view (range and field
+    /// of view) on ticks when it walks, and on ticks when it has worked a second or more.
+    fn cameras_on_the_worker(policy: CameraPolicy) -> (f64, f64) {
+        let (mut walking, mut working) = ((0, 0), (0, 0));
+        for seed in 0..6 {
+            let mut layout = generate::layout(200 + seed);
+            layout.camera.policy = policy;
+            let mut w = World::new(layout, Scenario::Dynamic, seed, 3);
+            let ids = ids(3);
+            let mut working_for = 0;
+            for _ in 0..600 {
+                w.step();
+                for (slot, id) in ids.iter().enumerate() {
+                    w.observe(slot, id);
+                }
+                let on =
+                    (0..3).filter(|&s| camera::in_view(&w.layout.camera, w.robots[s].pose, w.worker.position)).count();
+                working_for = if w.worker.phase == WorkerPhase::Stationary { working_for + 1 } else { 0 };
+                let tally = match (w.worker.phase, working_for) {
+                    (WorkerPhase::Stationary, ..10) => continue,
+                    (WorkerPhase::Stationary, _) => &mut working,
+                    _ => &mut walking,
+                };
+                *tally = (tally.0 + on, tally.1 + 1);
+            }
+        }
+        (walking.0 as f64 / walking.1 as f64, working.0 as f64 / working.1 as f64)
+    }
+
+    #[test]
+    fn tracking_cameras_follow_a_walking_worker_and_look_round_while_it_works() {
+        let (walking, working) = cameras_on_the_worker(CameraPolicy::Track);
+        assert!(walking > 1.8, "{walking:.2} of 3 cameras on the walking worker");
+        assert!(
+            working < walking - 0.5,
+            "{working:.2} of 3 cameras stay on a working worker ({walking:.2} on a walking one)"
+        );
     }
 
     #[test]
