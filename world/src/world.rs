@@ -170,9 +170,13 @@ impl World {
         let worker = self.worker.position;
         let track = self.layout.camera.policy == CameraPolicy::Track;
         let sighting = self.sightings.fresh(self.tick);
-        let fleet = self.robots.iter().enumerate().filter(|(_, r)| r.in_fleet);
-        let keeper =
-            pan::keeper(&self.sightings, self.tick, DT, fleet.map(|(slot, r)| (slot, r.pose.position, &r.pan)));
+        // Only `track` cameras split roles; fixed ones need no keeper worked out.
+        let keeper = track
+            .then(|| {
+                let fleet = self.robots.iter().enumerate().filter(|(_, r)| r.in_fleet);
+                pan::keeper(&self.sightings, self.tick, DT, fleet.map(|(slot, r)| (slot, r.pose.position, &r.pan)))
+            })
+            .flatten();
         let (floor, half_fov) = (self.layout.floor.size, self.layout.camera.fov_deg.to_radians() / 2.0);
         for (slot, r) in self.robots.iter_mut().enumerate() {
             if self.scenario.moving_robots() {
