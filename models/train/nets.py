@@ -14,6 +14,8 @@
 - FacingScorer: a StationScorer whose rows also say where the worker's body faces
   against each station.
 """
+import functools
+
 import torch
 from torch import nn
 
@@ -100,31 +102,43 @@ class StationScorer(nn.Module):
         self.out = nn.Linear(hidden, self.steps)
 
     def forward(self, x):
-        return self.score(self.station_rows(x))
+        return self.score(station_rows(*self.station_parts(x)))
 
-    def station_rows(self, x):
-        """Per station (class order), its [B, F, D] rows: its relation block, the
-        derived values, the track values and the keypoints' projection."""
+    def station_parts(self, x):
+        """The parts of every station's row: its relation block with the derived values
+        [B, F, CLASSES, PER_STATION + 2], and what all stations share [B, F, n], the
+        track values and the keypoints' projection."""
         keypoints, track = x[..., :KEYPOINTS], x[..., KEYPOINTS : KEYPOINTS + TRACK_VALUES]
-        shared = torch.cat([track, torch.relu(self.pose(keypoints))], -1)
-        return [torch.cat([station_values(x[..., KEYPOINTS:], k), shared], -1) for k in range(CLASSES)]
+        return station_values(x[..., KEYPOINTS:]), torch.cat([track, torch.relu(self.pose(keypoints))], -1)
 
-    def score(self, stations):
-        b, f, _ = stations[0].shape
-        rows = torch.stack(stations, 1).reshape(b * CLASSES, f, -1)  # station-major
-        _, h = self.gru(rows)
+    def score(self, rows):
+        b, _, f, d = rows.shape
+        _, h = self.gru(rows.reshape(b * CLASSES, f, d))
         h = h[-1].reshape(b, CLASSES, -1)
-        summary = torch.cat([h.mean(1), h.max(1).values], -1)
+        # The max over the stations as elementwise maxima: tract 0.23 runs a ReduceMax
+        # over this middle axis ten times slower than the three Max ops.
+        top = functools.reduce(torch.maximum, h.unbind(1))
+        summary = torch.cat([h.mean(1), top], -1)
         z = torch.relu(self.head_own(h) + self.head_set(summary)[:, None, :])
         return self.out(self.drop(z)).transpose(1, 2)
 
 
-def station_values(rel, k):
-    """Station k's relation block of a relation block `rel` [..., RELATIONS] and the two
-    values derived from it: the constant-velocity model's cost (off the worker's line,
-    or the distance when the worker stands or the station lies behind) and the time to
-    reach it at the closing speed (/ 3 s, at most 1)."""
-    st = rel[..., TRACK_VALUES + k * PER_STATION : TRACK_VALUES + (k + 1) * PER_STATION]
+def station_rows(*parts):
+    """Every station's rows [B, CLASSES, F, D] (class order): the parts side by side, each
+    either per station [B, F, CLASSES, n] or shared by all stations [B, F, n]. The values
+    are computed for all stations at once (one op per step instead of one per step and
+    station: most of a small model's run time in tract, docs/BENCHMARKS.md) and joined
+    station by station, since tract 0.23 fails to optimise a broadcast of the shared
+    parts feeding a Concat that feeds a product, as the GRU's input does."""
+    return torch.stack([torch.cat([p[..., k, :] if p.dim() == 4 else p for p in parts], -1) for k in range(CLASSES)], 1)
+
+
+def station_values(rel):
+    """Every station's relation block of a relation block `rel` [..., RELATIONS] with the
+    two values derived from it, [..., CLASSES, PER_STATION + 2]: the constant-velocity
+    model's cost (off the worker's line, or the distance when the worker stands or the
+    station lies behind) and the time to reach it at the closing speed (/ 3 s, at most 1)."""
+    st = rel[..., TRACK_VALUES : TRACK_VALUES + CLASSES * PER_STATION].unflatten(-1, (CLASSES, PER_STATION))
     known, dist, closing, cos, sin = st[..., 0:1], st[..., 1:2], st[..., 2:3], st[..., 4:5], st[..., 5:6]
     off_line = known * torch.where(cos > 0, dist * sin.abs(), dist)
     eta = torch.where(closing > 0.1, dist * 10 / closing.clamp(min=0.1), torch.full_like(dist, 30.0)) / 30
@@ -147,15 +161,17 @@ class PeerSetScorer(StationScorer):
         self.phi = nn.Sequential(nn.Linear(TRACK_VALUES + PER_STATION + 2, phi), nn.ReLU(), nn.Linear(phi, phi), nn.ReLU())
 
     def forward(self, x, peers):
-        present = peers[..., 0:1]  # [B, F, P, 1]: a peer's block starts with 1
-        count = present.sum(2)
-        stations = []
-        for k, own in enumerate(self.station_rows(x)):
-            h = self.phi(torch.cat([peers[..., :TRACK_VALUES], station_values(peers, k)], -1)) * present
-            mean = h.sum(2) / count.clamp(min=1)
-            top = h.max(2).values  # phi's output is >= 0, so the empty slots' zeros never win
-            stations.append(torch.cat([own, mean, top, count / self.slots], -1))
-        return self.score(stations)
+        present = peers[..., 0:1, None]  # [B, F, P, 1, 1]: a peer's block starts with 1
+        count = present.sum(2)[..., 0, :]  # [B, F, 1]
+        # phi's first layer over [track values ‖ station values] as two products added
+        # with broadcasting, not over a Concat of broadcast values, which tract 0.23
+        # fails to optimise (as the head's first layer above).
+        first, w = self.phi[0], self.phi[0].weight
+        track = peers[..., None, :TRACK_VALUES] @ w[:, :TRACK_VALUES].T
+        h = self.phi[1:](track + station_values(peers) @ w[:, TRACK_VALUES:].T + first.bias) * present
+        mean = h.sum(2) / count[..., None].clamp(min=1)  # [B, F, CLASSES, phi]
+        top = h.max(2).values  # phi's output is >= 0, so the empty slots' zeros never win
+        return self.score(station_rows(*self.station_parts(x), mean, top, count / self.slots))
 
 
 class FacingScorer(StationScorer):
@@ -168,7 +184,6 @@ class FacingScorer(StationScorer):
         super().__init__(horizon, extra=3, **kw)
 
     def forward(self, x):
-        rows = self.station_rows(x[..., : KEYPOINTS + RELATIONS])
         face = x[..., KEYPOINTS + RELATIONS : KEYPOINTS + RELATIONS + FACING]
-        known = face[..., 0:1]
-        return self.score([torch.cat([row, known, face[..., 1 + 2 * k : 3 + 2 * k]], -1) for k, row in enumerate(rows)])
+        known, bearings = face[..., 0:1], face[..., 1:].unflatten(-1, (CLASSES, 2))
+        return self.score(station_rows(*self.station_parts(x[..., : KEYPOINTS + RELATIONS]), known, bearings))

@@ -10,6 +10,8 @@
 mod ort;
 mod tract;
 
+pub use tract::{profile_nodes, NodeTime};
+
 use crate::floor::RELATION_DIM;
 use crate::graph::StarGraph;
 use crate::manifest::{Dim, GcnNodes, Manifest, ModelKind, ModelSpec};

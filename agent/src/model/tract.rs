@@ -13,6 +13,7 @@ use super::{Input, LoadedModel, Runner};
 use anyhow::{Context, Result};
 use std::path::Path;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 use tract_onnx::prelude::*;
 use tract_onnx::tract_core::ops::{gru_seq::GruSeq, scan::OptScan};
 
@@ -22,14 +23,58 @@ pub struct TractModel {
 
 impl TractModel {
     pub fn load(path: &Path) -> Result<Self> {
-        let plan = tract_onnx::onnx()
-            .model_for_path(path)
-            .and_then(|m| m.into_optimized())
-            .map(restart_recurrences_every_run)
-            .and_then(|m| m.into_runnable())
-            .with_context(|| format!("{}: tract cannot load and optimise this model", path.display()))?;
-        Ok(TractModel { plan })
+        Ok(TractModel { plan: plan(path)? })
     }
+}
+
+fn plan(path: &Path) -> Result<Arc<TypedRunnableModel>> {
+    tract_onnx::onnx()
+        .model_for_path(path)
+        .and_then(|m| m.into_optimized())
+        .map(restart_recurrences_every_run)
+        .and_then(|m| m.into_runnable())
+        .with_context(|| format!("{}: tract cannot load and optimise this model", path.display()))
+}
+
+/// One node of a model's optimised tract plan and its mean time per run.
+#[derive(Debug, Clone)]
+pub struct NodeTime {
+    pub node: String,
+    pub op: String,
+    pub mean: Duration,
+}
+
+/// Where a model's run time goes in tract: every node of its optimised plan with its
+/// mean time over `runs` runs on `inputs` (after `runs / 10` unmeasured ones), slowest
+/// first. For `benches/ops.rs`: the daemon never calls it.
+pub fn profile_nodes(path: &Path, inputs: &[Input<'_>], runs: usize) -> Result<Vec<NodeTime>> {
+    let plan = plan(path)?;
+    let mut state = TypedSimpleState::new(&plan)?;
+    let inputs = tensors(inputs)?;
+    let mut total = vec![Duration::ZERO; plan.model().nodes.len()];
+    let warm_up = runs / 10;
+    for run in 0..warm_up + runs {
+        state.run_plan_with_eval(inputs.clone(), |ctx, op_state, node, input| {
+            let start = Instant::now();
+            let out = tract_onnx::tract_core::plan::eval(ctx, op_state, node, input);
+            if run >= warm_up {
+                total[node.id] += start.elapsed();
+            }
+            out
+        })?;
+    }
+    let mut nodes: Vec<NodeTime> = plan
+        .model()
+        .nodes
+        .iter()
+        .map(|n| NodeTime { node: n.name.clone(), op: n.op.name().into_owned(), mean: total[n.id] / runs as u32 })
+        .collect();
+    nodes.sort_by_key(|n| std::cmp::Reverse(n.mean));
+    Ok(nodes)
+}
+
+fn tensors(inputs: &[Input<'_>]) -> TractResult<TVec<TValue>> {
+    inputs.iter().map(|i| Tensor::from_shape(i.shape, i.data).map(TValue::from)).collect()
 }
 
 /// Makes every recurrent op of an optimised model start from its initial state on
@@ -59,11 +104,7 @@ struct TractRunner {
 
 impl Runner for TractRunner {
     fn run(&mut self, inputs: &[Input<'_>]) -> Result<Vec<Vec<f32>>> {
-        let inputs = inputs
-            .iter()
-            .map(|i| Tensor::from_shape(i.shape, i.data).map(TValue::from))
-            .collect::<TractResult<TVec<_>>>()?;
-        let outputs = self.state.run(inputs)?;
+        let outputs = self.state.run(tensors(inputs)?)?;
         outputs.iter().map(|o| Ok(o.to_plain_array_view::<f32>()?.iter().copied().collect())).collect()
     }
 }
