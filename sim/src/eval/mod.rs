@@ -500,6 +500,7 @@ pub fn print(r: &Report) {
 mod tests {
     use super::*;
     use spwi_agent::model::Backend;
+    use spwi_world::layout::CameraPolicy;
 
     fn fixture() -> Arc<ModelSet> {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
@@ -609,13 +610,30 @@ mod tests {
         // Run on the held-out floors, the page reads the targets off both.
         let mut st = st;
         for r in st.generalisation.iter_mut().chain(st.warm_maps.iter_mut()) {
-            r.floors = format!("{}, Fixed cameras", studies::HELDOUT_FLOORS);
+            r.floors = studies::with_cameras(studies::HELDOUT_FLOORS, CameraPolicy::Fixed);
         }
         let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
         for maps in ["empty", "warm, 30 s"] {
-            let row = format!("| collective − CVM at t | ≥ +10 pts | {maps} |");
+            let row = format!("| collective − CVM at t | ≥ +10 pts | fixed | {maps} |");
             assert!(page.contains(&row), "no row {row:?} in\n{page}");
         }
+
+        // A floor is read against the held-out floors under its own cameras only.
+        let (heldout, moved) = (st.generalisation[0].clone(), st.generalisation[0].clone());
+        let tracked = |mut r: Report, floors: &str, collective: f64| {
+            r.floors = studies::with_cameras(floors, CameraPolicy::Track);
+            r.models.get_mut("collective").unwrap().t = collective;
+            r
+        };
+        st.generalisation.push(tracked(heldout, studies::HELDOUT_FLOORS, 0.85));
+        st.generalisation.push(tracked(moved, "factory-moved.toml", 0.81));
+        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        let moved: Vec<&str> = page.lines().filter(|l| l.starts_with("| collective at t on factory-moved")).collect();
+        assert_eq!(moved.len(), 1, "{page}");
+        assert!(
+            moved[0].contains("| track | empty | 4.0 (collective 81.0") && moved[0].ends_with("| met |"),
+            "{moved:?}"
+        );
     }
 
     #[test]
