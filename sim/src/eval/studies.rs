@@ -697,11 +697,12 @@ fn target_rows(st: &Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &
         return;
     };
     let maps = if warm { format!("warm, {} s", heldout.warm_map_s) } else { "empty".to_owned() };
-    let maps = format!("{} | {maps}", format!("{cameras:?}").to_lowercase());
+    // The cameras and maps columns of every row.
+    let setting = format!("{} | {maps}", format!("{cameras:?}").to_lowercase());
     let gap = collective.0 - cvm.0;
     let _ = writeln!(
         w,
-        "| collective − CVM at t | ≥ +10 pts | {maps} | {:+.1} (collective {}, CVM {}) | {} |",
+        "| collective − CVM at t | ≥ +10 pts | {setting} | {:+.1} (collective {}, CVM {}) | {} |",
         100.0 * gap,
         with_ci(collective.0, collective.1),
         with_ci(cvm.0, cvm.1),
@@ -712,7 +713,7 @@ fn target_rows(st: &Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &
             let behind = collective.0 - c.0;
             let _ = writeln!(
                 w,
-                "| collective at t on {floors}, behind the held-out floors | ≤ 5 pts | {maps} | {:.1} (collective {}) | {} |",
+                "| collective at t on {floors}, behind the held-out floors | ≤ 5 pts | {setting} | {:.1} (collective {}) | {} |",
                 100.0 * behind,
                 with_ci(c.0, c.1),
                 verdict(-behind, -0.05, None)
@@ -722,7 +723,7 @@ fn target_rows(st: &Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &
     let lead = collective.0 - ego.0;
     let _ = writeln!(
         w,
-        "| collective − ego at t | ≥ +8 pts | {maps} | {:+.1} | {} |",
+        "| collective − ego at t | ≥ +8 pts | {setting} | {:+.1} | {} |",
         100.0 * lead,
         verdict(lead, 0.08, None)
     );
@@ -732,14 +733,14 @@ fn target_rows(st: &Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &
         let rising = team.windows(2).all(|p| p[1].0 > p[0].0);
         let _ = writeln!(
             w,
-            "| team, all ticks, 1 → 2 → 3 → 4 robots | rising at every step | {maps} | {} | {} |",
+            "| team, all ticks, 1 → 2 → 3 → 4 robots | rising at every step | {setting} | {} | {} |",
             team.iter().map(|a| pct(a.0)).collect::<Vec<_>>().join(" → "),
             if rising { "met" } else { "missed" }
         );
         let three = team[2];
         let _ = writeln!(
             w,
-            "| team, all ticks, 3 robots | ≥ 80 % | {maps} | {} | {} |",
+            "| team, all ticks, 3 robots | ≥ 80 % | {setting} | {} | {} |",
             with_ci(three.0, three.1),
             verdict(three.0, 0.80, Some(three.1[0]))
         );
@@ -747,7 +748,7 @@ fn target_rows(st: &Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &
     if let Some(farther) = heldout.close_pair.get("collective_farther") {
         let _ = writeln!(
             w,
-            "| recall of the farther station of a close pair | ≥ 75 % | {maps} | {} | {} |",
+            "| recall of the farther station of a close pair | ≥ 75 % | {setting} | {} | {} |",
             with_ci(farther.t, farther.t_ci95),
             verdict(farther.t, 0.75, Some(farther.t_ci95[0]))
         );
