@@ -36,6 +36,7 @@ use spwi_agent::manifest::Manifest;
 use spwi_agent::model::ModelSet;
 use spwi_proto::Station;
 use spwi_world::generate::NamedLayout;
+use spwi_world::layout::CameraPolicy;
 use spwi_world::world::Scenario;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -124,6 +125,8 @@ pub struct Report {
     pub seed: u64,
     pub model_set: String,
     pub floors: String,
+    /// The camera policy of every floor, when they share one.
+    pub cameras: Option<CameraPolicy>,
     pub faults: Faults,
     pub tick: TickConfig,
     /// Seconds the fleet worked on each floor before an episode (its maps warm).
@@ -307,6 +310,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         seed: o.seed,
         model_set: m.name.clone(),
         floors: o.floors_name.clone(),
+        cameras: shared_camera_policy(&o.floors),
         faults: o.faults.clone(),
         tick: o.tick.clone(),
         warm_map_s: f64::from(o.warm_map_ticks) / 10.0,
@@ -384,6 +388,12 @@ pub fn find_model_set(root: &Path, window: usize, horizon: usize, frames: Option
         "no trained model set in {} has window {window}, {frames} frames and horizon {horizon} (models/train.sh builds them)",
         root.display()
     )
+}
+
+/// The camera policy all of `floors` share, if they do.
+fn shared_camera_policy(floors: &[NamedLayout]) -> Option<CameraPolicy> {
+    let first = floors.first()?.layout.camera.policy;
+    floors.iter().all(|f| f.layout.camera.policy == first).then_some(first)
 }
 
 /// The human-readable summary of one report.
@@ -500,7 +510,6 @@ pub fn print(r: &Report) {
 mod tests {
     use super::*;
     use spwi_agent::model::Backend;
-    use spwi_world::layout::CameraPolicy;
 
     fn fixture() -> Arc<ModelSet> {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
@@ -622,6 +631,7 @@ mod tests {
         let (heldout, moved) = (st.generalisation[0].clone(), st.generalisation[0].clone());
         let tracked = |mut r: Report, floors: &str, collective: f64| {
             r.floors = studies::with_cameras(floors, CameraPolicy::Track);
+            r.cameras = Some(CameraPolicy::Track);
             r.models.get_mut("collective").unwrap().t = collective;
             r
         };

@@ -73,16 +73,6 @@ pub fn with_cameras(floors: &str, policy: CameraPolicy) -> String {
     format!("{floors}, {policy:?} cameras")
 }
 
-/// The policy a run's floors were forced to by [`with_cameras`] (their own otherwise,
-/// which is `Fixed` on every floor the studies read).
-fn cameras_of(r: &Report) -> CameraPolicy {
-    if r.floors.ends_with(&with_cameras("", CameraPolicy::Track)) {
-        CameraPolicy::Track
-    } else {
-        CameraPolicy::Fixed
-    }
-}
-
 /// The floors of the generalisation study, beside the study floors (`study`, left out
 /// here when it is one of them), each with `camera` forced and named if given.
 pub fn unseen_floors(study: &str, camera: Option<CameraPolicy>) -> Result<Vec<(String, Vec<NamedLayout>)>> {
@@ -581,7 +571,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for r in &st.designs {
             let gap = collective_minus_ego(r);
-            let cameras = r.floors.rsplit(", ").next().unwrap_or("");
+            let cameras = r.cameras.map_or("mixed cameras".to_owned(), |p| format!("{p:?} cameras"));
             let _ = writeln!(
                 w,
                 "| {} | {cameras} | {} | {} | {} | {} | {} | {gap} | {} | {} | {} | {} | {} | {} |",
@@ -686,7 +676,7 @@ fn target_rows(st: &Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &
             r.model_set == ours
                 && r.robots == robots
                 && r.floors.starts_with(floors)
-                && cameras_of(r) == cameras
+                && r.cameras == Some(cameras)
                 && (r.warm_map_s > 0.0) == warm
         })
     };
