@@ -10,7 +10,8 @@ reproduce the file's outputs on its reference inputs (reference.json) and on ran
 rows to TOLERANCE, or nothing is written. The new export must match the old file the
 same way in onnxruntime; then it replaces the file. reference.json and the manifest
 stay as they are: the golden tests replay the old vectors through the new graphs.
-Runs in the training venv (models/train.sh).
+Runs in the training venv (models/train.sh). A file this script wrote can be read again
+except a peer-set collective GRU, whose phi layer nets.py now exports in two parts.
 """
 import json
 import os
@@ -28,7 +29,7 @@ from export import export
 from nets import FacingScorer, PeerSetScorer, StationScorer
 
 TOLERANCE = 1e-5
-FILES = {"ego_gru": "ego_gru.onnx", "collective_gru": "collective_gru.onnx"}
+KINDS = ("ego_gru", "collective_gru")
 
 
 def onnx_to_torch_gates(w):
@@ -49,6 +50,11 @@ def load_weights(module, path):
         if isinstance(sub, torch.nn.Linear):
             parts = name.split(".")
             node = "/" + "/".join(".".join(parts[: i + 1]) for i in range(len(parts))) + "/MatMul"
+            if node not in nodes:
+                sys.exit(
+                    f"{path}: no MatMul node {node} holds {name}'s weights (nets.py may compute that "
+                    "layer in parts, as PeerSetScorer's phi; re-export from the file training wrote)"
+                )
             state[f"{name}.weight"] = init[nodes[node].input[1]].T
             if sub.bias is not None:
                 state[f"{name}.bias"] = init[f"{name}.bias"]
@@ -65,12 +71,12 @@ def load_weights(module, path):
     return module.eval()
 
 
-def scorer_for(manifest, kind, path):
-    horizon = manifest["horizon"]
-    inputs = {i.name for i in onnx.load(path).graph.input}
-    if "peers" in inputs:
-        slots = onnx.load(path).graph.input[1].type.tensor_type.shape.dim[2].dim_value
-        return PeerSetScorer(horizon, slots=slots)
+def scorer_for(manifest, path):
+    """The nets.py module of the GRU file `path`: a peer-set scorer if it takes the peers'
+    input ([1, F, P, RELATIONS]), else as the set's rows say."""
+    horizon, inputs = manifest["horizon"], onnx.load(path).graph.input
+    if len(inputs) > 1:
+        return PeerSetScorer(horizon, slots=inputs[1].type.tensor_type.shape.dim[2].dim_value)
     return FacingScorer(horizon) if manifest["row"] == "relations_facing" else StationScorer(horizon)
 
 
@@ -93,21 +99,20 @@ def reexport(set_dir):
         return
     references = json.load(open(os.path.join(set_dir, "reference.json")))
     rng = np.random.default_rng(7)
-    for kind, file in FILES.items():
-        path = os.path.join(set_dir, file)
-        module = load_weights(scorer_for(manifest, kind, path), path)
+    for kind in KINDS:
+        path = os.path.join(set_dir, f"{kind}.onnx")
+        module = load_weights(scorer_for(manifest, path), path)
         old = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
+        names = [i.name for i in old.get_inputs()]
         feeds = list(feeds_of(references[kind], rng))
+        inputs = lambda feed: tuple(torch.from_numpy(feed[n]) for n in names)  # noqa: E731
         with torch.no_grad():
             for feed in feeds:
-                got = module(*(torch.from_numpy(feed[i.name]) for i in old.get_inputs()))
-                if (d := worst([got.numpy()], old.run(None, feed))) > TOLERANCE:
+                if (d := worst([module(*inputs(feed)).numpy()], old.run(None, feed))) > TOLERANCE:
                     sys.exit(f"{path}: the weights read back give other outputs (by {d}); nothing written")
         with tempfile.TemporaryDirectory() as tmp:
-            new_path = os.path.join(tmp, file)
-            names = [i.name for i in old.get_inputs()]
-            x = tuple(torch.from_numpy(feeds[0][n]) for n in names)
-            export(module, x, names, ["logits"], new_path)
+            new_path = os.path.join(tmp, f"{kind}.onnx")
+            export(module, inputs(feeds[0]), names, ["logits"], new_path)
             new = ort.InferenceSession(new_path, providers=["CPUExecutionProvider"])
             d = max(worst(new.run(None, f), old.run(None, f)) for f in feeds)
             if d > TOLERANCE:
