@@ -17,7 +17,9 @@
 #        SETS="default" models/train.sh
 # Settings (environment): EPISODES per scenario (300), SEED (1), LAYOUTS (the floors
 # trained on: train:0..300, one episode after another on each; never the evaluation's
-# held-out family), SPWI_TRAIN_VENV,
+# held-out family), TRACK_SHARE and WARM_SHARE (the shares of episodes whose cameras
+# track the worker, and whose fleet starts from the maps of up to WARM_UP_MAX s of work
+# on the floor: sim/src/training_mix.rs), SPWI_TRAIN_VENV,
 # SPWI_TRAIN_DATA (where the exports go, ~5 GB), MODELS_OUT (where the sets go:
 # models/), STAGE2_ONLY=1 (reuse the GCN and temporal exports already in
 # SPWI_TRAIN_DATA), GCN_FROM=models/SET (skip stage 1: take that shipped set's GCN,
@@ -28,6 +30,9 @@ cd "$(dirname "$0")/.."
 EPISODES="${EPISODES:-300}"
 SEED="${SEED:-1}"
 LAYOUTS="${LAYOUTS:-train:0..300}"
+TRACK_SHARE="${TRACK_SHARE:-0}"
+WARM_SHARE="${WARM_SHARE:-0}"
+WARM_UP_MAX="${WARM_UP_MAX:-0}"
 SETS="${SETS:-paper default relations peer-set w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
 VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
 DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
@@ -54,7 +59,9 @@ export_all() { # $1: part name, $2: robots, then extra dataset flags
   local pids=()
   for s in 1 2 3; do
     "$SIM" dataset --scenario "$s" --layouts "$LAYOUTS" --episodes "$EPISODES" --robots "$robots" --ticks 300 \
-      --seed $((SEED * 10 + s)) --out "$DATA/$part-s$s" "$@" > "$DATA/$part-s$s.log" 2>&1 &
+      --seed $((SEED * 10 + s)) --out "$DATA/$part-s$s" \
+      --track-share "$TRACK_SHARE" --warm-share "$WARM_SHARE" --warm-up-max "$WARM_UP_MAX" "$@" \
+      > "$DATA/$part-s$s.log" 2>&1 &
     pids+=($!)
     if [ "${#pids[@]}" -ge 2 ]; then wait "${pids[0]}"; pids=("${pids[@]:1}"); fi
   done

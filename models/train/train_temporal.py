@@ -243,7 +243,11 @@ def main():
         "opset": OPSET,
         "dataset": {
             "exports": [
-                {k: ex.desc.get(k) for k in ("scenario", "episodes", "robots", "ticks_per_episode", "seed", "layouts")}
+                {
+                    **{k: ex.desc.get(k) for k in ("scenario", "episodes", "robots", "ticks_per_episode", "seed", "layouts")},
+                    # the cameras and warm-ups the episodes ran under (sim/src/training_mix.rs)
+                    "conditions": {k: v for k, v in ex.desc.get("conditions", {}).items() if k.endswith(("share", "_s"))},
+                }
                 for ex in exports
             ],
             "episode_seed": exports[0].desc["episode_seed"],

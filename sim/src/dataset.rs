@@ -30,7 +30,8 @@
 //! `dataset.json` describes every array.
 
 use crate::npy::NpyWriter;
-use crate::team_floor::TeamFloor;
+use crate::team_floor::{warm_up_seed, TeamFloor};
+use crate::training_mix::TrainingMix;
 use crate::world_args::{check_robots, WorldArgs};
 use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
@@ -71,6 +72,8 @@ pub struct DatasetOptions {
     pub gcn: Option<PathBuf>,
     /// Also write the worker node's feature per row (temporal/human_feature.npy).
     pub human_features: bool,
+    /// The cameras and warm-ups the episodes run under.
+    pub mix: TrainingMix,
 }
 
 /// 0 train, 1 validation, 2 test: 60/20/20 by episode index.
@@ -211,15 +214,23 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     let mut graph = GraphBuilder::new(n, o.edge_weight);
     let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("r{i}"))).collect::<Result<_, _>>()?;
     let progress = crate::progress::Progress::new("episodes exported", o.episodes as u64, 5);
+    let mut episode_conditions = Vec::with_capacity(o.episodes as usize);
     for e in 0..o.episodes {
-        let floor = &o.floors[e as usize % o.floors.len()].layout;
-        let mut world = World::new(floor.clone(), o.scenario, episode_seed(o.seed, e), o.robots);
+        let seed = episode_seed(o.seed, e);
+        let mut floor = o.floors[e as usize % o.floors.len()].layout.clone();
+        let conditions = o.mix.draw(seed, floor.camera.policy);
+        floor.camera.policy = conditions.camera;
+        episode_conditions.push(conditions);
+        let mut world = World::new(floor.clone(), o.scenario, seed, o.robots);
         let camera = crate::calibration::of(&floor.camera);
-        let mut team_floor = TeamFloor::new(camera.clone(), o.robots);
+        let mut team_floor = match conditions.warm_up_ticks {
+            0 => TeamFloor::new(camera.clone(), o.robots),
+            ticks => TeamFloor::warmed(&floor, o.scenario, warm_up_seed(seed), o.robots, ticks)?,
+        };
         // The same fleet as each robot holds it when it hears only some peers, some
         // of their messages lost: who hears whom is drawn once per episode.
-        let mut heard_floor = TeamFloor::new(camera.clone(), o.robots);
-        let mut rng = ChaCha8Rng::seed_from_u64(episode_seed(o.seed, e) ^ 0x4845_4152_445f_5045); // "HEARD_PE"
+        let mut heard_floor = team_floor.clone();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4845_4152_445f_5045); // "HEARD_PE"
         let hears = random_hearing(&mut rng, o.robots);
         let total = o.ticks as usize + FUTURE;
         let mut intents = Vec::with_capacity(total);
@@ -364,6 +375,14 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     for w in [tp.embedding, tp.gcn_logits, tp.human_feature].into_iter().flatten() {
         w.finish()?;
     }
+    let conditions = json!({
+        "track_share": o.mix.track_share,
+        "warm_share": o.mix.warm_share,
+        "warm_up_max_s": f64::from(o.mix.warm_up_max_ticks) / 10.0,
+        "drawn": "per episode from its seed (sim/src/training_mix.rs): cameras track the worker with probability track_share, else the floor's own policy; with probability warm_share the fleet first works (0, warm_up_max_s] s on the floor, another worker, and the episode starts from the station maps it built",
+        "camera_of_episode": episode_conditions.iter().map(|c| c.camera).collect::<Vec<_>>(),
+        "warm_up_s_of_episode": episode_conditions.iter().map(|c| f64::from(c.warm_up_ticks) / 10.0).collect::<Vec<_>>(),
+    });
     let mut description = json!({
         "scenario": o.scenario as u8,
         "episodes": o.episodes,
@@ -418,6 +437,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             }
         }
     });
+    // (set apart: one json! of it all exceeds the macro's recursion limit)
+    description["conditions"] = conditions;
     // Describe only the arrays this export wrote.
     let optional =
         [("embedding", o.gcn.is_some()), ("gcn_logits", o.gcn.is_some()), ("human_feature", o.human_features)];
@@ -464,6 +485,17 @@ pub struct DatasetArgs {
     /// Also write the worker node's 1024-d feature per row (the 1D-CNN baseline's input).
     #[arg(long)]
     pub human_features: bool,
+    /// Share of the episodes (drawn per episode) whose cameras track the worker; the
+    /// others keep the floor's policy (or --camera's).
+    #[arg(long, default_value_t = 0.0)]
+    pub track_share: f64,
+    /// Share of the episodes (drawn per episode) that start from the station maps of a
+    /// fleet that first worked on the floor for up to --warm-up-max seconds.
+    #[arg(long, default_value_t = 0.0)]
+    pub warm_share: f64,
+    /// The longest warm-up, seconds: each warm episode's is drawn uniformly up to it.
+    #[arg(long, default_value_t = 0)]
+    pub warm_up_max: u32,
 }
 
 /// `spwi-sim dataset`: parses nothing more, runs the tool.
@@ -480,7 +512,11 @@ pub fn main(a: DatasetArgs) -> Result<()> {
         max_nodes,
         edge_weight,
         human_features,
+        track_share,
+        warm_share,
+        warm_up_max,
     } = a;
+    let mix = TrainingMix::new(track_share, warm_share, warm_up_max.saturating_mul(10))?;
     let floors = world.floors()?;
     check_robots(robots, &floors)?;
     if episodes == 0 || ticks == 0 {
@@ -511,6 +547,7 @@ pub fn main(a: DatasetArgs) -> Result<()> {
         edge_weight,
         gcn,
         human_features,
+        mix,
     })?;
     println!(
         "wrote {} ({samples} graph samples, {rows} temporal rows) in {:.1} s",
@@ -530,6 +567,10 @@ mod tests {
     use super::*;
 
     fn export_to(dir: &Path, gcn: Option<PathBuf>) -> (u64, u64) {
+        export_mixed(dir, gcn, TrainingMix::NONE)
+    }
+
+    fn export_mixed(dir: &Path, gcn: Option<PathBuf>, mix: TrainingMix) -> (u64, u64) {
         let _ = std::fs::remove_dir_all(dir);
         export(&DatasetOptions {
             scenario: Scenario::Dynamic,
@@ -545,8 +586,58 @@ mod tests {
             edge_weight: spwi_agent::graph::EdgeWeight::Proximity,
             gcn,
             human_features: true,
+            mix,
         })
         .unwrap()
+    }
+
+    /// The bytes after the header of a .npy file of the export in `dir` (the header's
+    /// length is at offset 8).
+    fn npy_data(dir: &Path, file: &str) -> Vec<u8> {
+        let b = std::fs::read(dir.join(file)).unwrap();
+        b[10 + u16::from_le_bytes([b[8], b[9]]) as usize..].to_vec()
+    }
+
+    #[test]
+    fn mixed_episodes_run_under_the_drawn_cameras_and_start_from_warm_maps() {
+        let base = std::env::temp_dir().join(format!("spwi-dataset-mix-{}", std::process::id()));
+        let (cold, tracked, warm) = (base.join("cold"), base.join("tracked"), base.join("warm"));
+        export_to(&cold, None);
+        export_mixed(&tracked, None, TrainingMix::new(1.0, 0.0, 0).unwrap());
+        export_mixed(&warm, None, TrainingMix::new(0.0, 1.0, 600).unwrap());
+        let conditions = |dir: &Path| {
+            let d: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(dir.join("dataset.json")).unwrap()).unwrap();
+            (d["conditions"]["camera_of_episode"].clone(), d["conditions"]["warm_up_s_of_episode"].clone())
+        };
+        assert_eq!(conditions(&cold), (json!(vec!["fixed"; 5]), json!(vec![0.0; 5])));
+        assert_eq!(conditions(&tracked), (json!(vec!["track"; 5]), json!(vec![0.0; 5])));
+        let (cameras, warm_ups) = conditions(&warm);
+        assert_eq!(cameras, json!(vec!["fixed"; 5]));
+        assert!(warm_ups.as_array().unwrap().iter().all(|s| (0.1..=60.0).contains(&s.as_f64().unwrap())), "{warm_ups}");
+        // The cameras: tracking ones keep the worker in view on more rows.
+        let seen = |dir: &Path| npy_data(dir, "temporal/seen.npy").iter().filter(|&&b| b == 1).count();
+        assert!(
+            seen(&tracked) > seen(&cold),
+            "rows seeing the worker: tracked {}, fixed {}",
+            seen(&tracked),
+            seen(&cold)
+        );
+        // The warm-up: stations on the team map over each episode's first second (ticks
+        // 0-9 of 40, 2 robots a tick); a fleet that has worked on the floor knows more.
+        let known = |dir: &Path| {
+            let bytes = npy_data(dir, "temporal/relations_team.npy");
+            let values: Vec<f32> = bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect();
+            let rows: Vec<&[f32]> = values.chunks_exact(RELATION_DIM).collect();
+            let at = |s: usize| floor::relations::TRACK_VALUES + s * floor::relations::PER_STATION;
+            (0..rows.len())
+                .filter(|i| i % (40 * 2) < 10 * 2)
+                .map(|i| (0..4).filter(|&s| rows[i][at(s)] == 1.0).count())
+                .sum::<usize>()
+        };
+        let (k_cold, k_warm) = (known(&cold), known(&warm));
+        assert!(k_warm > k_cold + 10, "stations known in the first second: warm {k_warm}, cold {k_cold}");
+        std::fs::remove_dir_all(base).unwrap();
     }
 
     #[test]
@@ -555,6 +646,21 @@ mod tests {
         export_to(&dir, None);
         let d: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("dataset.json")).unwrap()).unwrap();
+        // What models/train reads from the description besides the arrays.
+        for key in [
+            "scenario",
+            "episodes",
+            "robots",
+            "ticks_per_episode",
+            "seed",
+            "layouts",
+            "episode_seed",
+            "split",
+            "max_nodes",
+            "edge_weight",
+        ] {
+            assert!(d.get(key).is_some(), "dataset.json lacks {key:?}");
+        }
         let arrays = d["temporal"]["arrays"].as_object().unwrap();
         assert!(!arrays.contains_key("embedding") && !arrays.contains_key("gcn_logits"));
         assert!(arrays.contains_key("human_feature") && dir.join("temporal/human_feature.npy").is_file());
@@ -591,11 +697,7 @@ mod tests {
         let (samples, rows) = export_to(&base.join("a"), Some(gcn.clone()));
         assert_eq!(rows, 5 * 40 * 2);
         assert!(samples > 0 && samples <= 5 * 20 * 2);
-        // bytes after the .npy header (its length is at offset 8)
-        let data = |p: &str| {
-            let b = std::fs::read(base.join("a").join(p)).unwrap();
-            (b.len() - 10 - u16::from_le_bytes([b[8], b[9]]) as usize) as u64
-        };
+        let data = |p: &str| npy_data(&base.join("a"), p).len() as u64;
         assert_eq!(data("spatial/x.npy"), samples * 16 * 1024 * 4);
         assert_eq!(data("spatial/adj.npy"), samples * 16 * 16 * 4);
         assert_eq!(data("spatial/label.npy"), samples);

@@ -19,6 +19,7 @@
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
 //! world_args.rs the world every tool runs in (scenario, floors, cameras)
 //! team_floor.rs every robot's floor view when each hears every other; warm maps
+//! training_mix.rs the cameras and warm-ups of a training export's episodes
 //! layout.rs     `spwi-sim layout`: a generated or mirrored floor to a TOML file
 //! ```
 
@@ -39,4 +40,5 @@ pub mod service;
 pub mod soak;
 pub mod stats;
 pub mod team_floor;
+pub mod training_mix;
 pub mod world_args;

@@ -15,6 +15,7 @@ use spwi_proto::{DetectionFrame, RobotId, WorkerEstimate};
 use spwi_world::layout::Layout;
 use spwi_world::world::{Scenario, World};
 
+#[derive(Clone)]
 pub struct TeamFloor {
     views: Vec<FloorView>,
 }
