@@ -26,6 +26,10 @@
 //!   `--human-features`, also the worker node's 1024-d feature (the 1D-CNN baseline's
 //!   input; 4 KB a row, so only when asked).
 //!
+//! Each episode runs on its floor under the conditions [`TrainingMix`] draws for it
+//! (cameras that track the worker, maps warm from earlier work; by default the floor as
+//! it is and empty maps), listed per episode in `dataset.json`.
+//!
 //! Episodes are split 60/20/20 (train/validation/test) by episode index, as in the paper.
 //! `dataset.json` describes every array.
 
