@@ -246,7 +246,7 @@ def main():
                 {
                     **{k: ex.desc.get(k) for k in ("scenario", "episodes", "robots", "ticks_per_episode", "seed", "layouts")},
                     # the cameras and warm-ups the episodes ran under (sim/src/training_mix.rs)
-                    "conditions": {k: v for k, v in ex.desc.get("conditions", {}).items() if k.endswith(("share", "_s"))},
+                    "conditions": {k: v for k, v in ex.desc.get("conditions", {}).items() if k in ("track_share", "warm_share", "warm_up_max_s")},
                 }
                 for ex in exports
             ],
