@@ -11,8 +11,7 @@
 #      worker's relations to the mapped stations (agent/src/floor/); `default` also
 #      reads where the worker's body faces against each station; `peer-set` is
 #      `relations` that pools one relation block per peer heard in its collective GRU;
-#      all share the GCN and data. `route` is `default` measured along each station's
-#      route round the obstacles (ROUTES=1 only: agent/src/floor/route.rs).
+#      all share the GCN and data.
 #
 # Usage: models/train.sh            (all sets; see models/README.md for the time)
 #        SETS="default" models/train.sh
@@ -20,9 +19,7 @@
 # trained on: train:0..300, one episode after another on each; never the evaluation's
 # held-out family), TRACK_SHARE and WARM_SHARE (the shares of episodes whose cameras
 # track the worker, and whose fleet starts from the maps of up to WARM_UP_MAX s of work
-# on the floor: sim/src/training_mix.rs), ROUTES=1 (the temporal exports measure the
-# relations along routes round the layout's obstacles: for SETS=route alone),
-# SPWI_TRAIN_VENV,
+# on the floor: sim/src/training_mix.rs), SPWI_TRAIN_VENV,
 # SPWI_TRAIN_DATA (where the exports go, ~5 GB), MODELS_OUT (where the sets go:
 # models/), STAGE2_ONLY=1 (reuse the GCN and temporal exports already in
 # SPWI_TRAIN_DATA), GCN_FROM=models/SET (skip stage 1: take that shipped set's GCN,
@@ -36,7 +33,6 @@ LAYOUTS="${LAYOUTS:-train:0..300}"
 TRACK_SHARE="${TRACK_SHARE:-0}"
 WARM_SHARE="${WARM_SHARE:-0}"
 WARM_UP_MAX="${WARM_UP_MAX:-0}"
-ROUTES="${ROUTES:-}"
 SETS="${SETS:-paper default relations peer-set w10-h10 w30-h30 w10-h10-f5 w10-h10-f3}"
 VENV="${SPWI_TRAIN_VENV:-$HOME/.cache/spwi/train-venv}"
 DATA="${SPWI_TRAIN_DATA:-$HOME/.cache/spwi/train-data}"
@@ -64,7 +60,7 @@ export_all() { # $1: part name, $2: robots, then extra dataset flags
   for s in 1 2 3; do
     "$SIM" dataset --scenario "$s" --layouts "$LAYOUTS" --episodes "$EPISODES" --robots "$robots" --ticks 300 \
       --seed $((SEED * 10 + s)) --out "$DATA/$part-s$s" \
-      --track-share "$TRACK_SHARE" --warm-share "$WARM_SHARE" --warm-up-max "$WARM_UP_MAX" ${ROUTES:+--routes} "$@" \
+      --track-share "$TRACK_SHARE" --warm-share "$WARM_SHARE" --warm-up-max "$WARM_UP_MAX" "$@" \
       > "$DATA/$part-s$s.log" 2>&1 &
     pids+=($!)
     if [ "${#pids[@]}" -ge 2 ]; then wait "${pids[0]}"; pids=("${pids[@]:1}"); fi
@@ -111,7 +107,6 @@ for set in $SETS; do
     default)    args=(--window 20 --horizon 20 --relations --facing --cnn1d) ;;
     relations)  args=(--window 20 --horizon 20 --relations) ;;
     peer-set)   args=(--window 20 --horizon 20 --relations --peer-set) ;;
-    route)      args=(--window 20 --horizon 20 --relations --facing) ;;
     # The study sets: the relations design, other windows and frame counts.
     w10-h10)    args=(--window 10 --horizon 10 --relations) ;;
     w30-h30)    args=(--window 30 --horizon 30 --relations) ;;

@@ -46,7 +46,7 @@
 
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
-use crate::floor::{self, CameraCalibration, FloorView, Obstacles, StationMap, RELATION_DIM};
+use crate::floor::{self, CameraCalibration, FloorView, StationMap, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
@@ -331,11 +331,6 @@ impl Engine {
         self.floor.team_map = team;
     }
 
-    /// The obstacles of the floor, for a set whose rows read routes.
-    pub fn adopt_obstacles(&mut self, obstacles: Obstacles) {
-        self.floor.obstacles = obstacles;
-    }
-
     /// Our own feed repeats itself: we set it aside until it changes.
     pub fn feed_is_stale(&self) -> bool {
         self.own_feed.is_stale(self.cfg.stale_after)
@@ -478,7 +473,8 @@ impl Engine {
         let visibility = f.visibility();
         let quality = vote::view_quality(&f);
         let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
-        let facing = self.row_layout.reads_facing().then(|| self.floor.camera().facing_in(&f)).flatten();
+        let facing =
+            (self.row_layout == RowLayout::RelationsFacing).then(|| self.floor.camera().facing_in(&f)).flatten();
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
         let will_vote = embedding.is_some() || (self.row_layout.reads_relations() && worker.is_some());
@@ -680,7 +676,7 @@ impl Engine {
             TemporalModel::Ego => (own.worker.as_ref(), self.floor.own_map.stations()),
             TemporalModel::Collective => (team_worker.as_ref(), self.floor.team_map.stations()),
         };
-        let (relations, facing) = self.row_layout.blocks(worker, own.facing, &stations, &self.floor.obstacles);
+        let (relations, facing) = self.row_layout.blocks(worker, own.facing, &stations);
         let peers = (slots > 0).then(|| {
             let mut p = vec![0.0; slots * RELATION_DIM];
             floor::peer_set(&fused_peers, &self.floor.team_map.stations(), slots, &mut p);

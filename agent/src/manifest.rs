@@ -184,8 +184,7 @@ pub struct Manifest {
     pub edge_weight: EdgeWeight,
     /// What the temporal rows hold: the paper's parts only (absent), or the worker's
     /// relations to the mapped stations (`relations`), also where it faces
-    /// (`relations_facing`), both measured along routes round the obstacles
-    /// (`route_facing`).
+    /// (`relations_facing`).
     #[serde(default, skip_serializing_if = "is_paper")]
     pub row: RowLayout,
     /// Relation rows (with or without facing) only: the collective GRU fuses its peers

@@ -14,15 +14,13 @@
 //!
 //! Rows with facing ([`RowLayout::RelationsFacing`]) add, after the relations, where
 //! the worker's body faces against each station ([`crate::floor::facing`]), from the
-//! robot's own view of the keypoints. Route rows ([`RowLayout::RouteFacing`]) hold the
-//! same two blocks measured along the way the worker would walk to each station round
-//! the obstacles the robot knows ([`crate::floor::route`]).
+//! robot's own view of the keypoints.
 //!
 //! A collective model with a peer set (`peer_slots` in its manifest) also reads, per
 //! picked tick, one relation block per peer heard ([`crate::floor::peer_set`]): its
 //! second input, `[frames, slots, RELATION_DIM]` ([`Window::peer_input`]).
 
-use crate::floor::{self, Obstacles, FACING_DIM, RELATION_DIM};
+use crate::floor::{self, FACING_DIM, RELATION_DIM};
 use spwi_proto::{WorkerEstimate, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
 use std::collections::BTreeMap;
 
@@ -44,46 +42,28 @@ pub enum RowLayout {
     Relations,
     /// [`RowLayout::Relations`], then where the worker faces against each station.
     RelationsFacing,
-    /// [`RowLayout::RelationsFacing`] measured along each station's route round the
-    /// obstacles rather than the straight line (the same width).
-    RouteFacing,
 }
 
 impl RowLayout {
     /// Rows of keypoints and relations (with or without facing): no embedding.
     pub fn reads_relations(self) -> bool {
-        matches!(self, RowLayout::Relations | RowLayout::RelationsFacing | RowLayout::RouteFacing)
-    }
-
-    /// Rows that end with the facing block.
-    pub fn reads_facing(self) -> bool {
-        matches!(self, RowLayout::RelationsFacing | RowLayout::RouteFacing)
+        matches!(self, RowLayout::Relations | RowLayout::RelationsFacing)
     }
 
     /// The relation and facing blocks of a row of this layout (`None` for the parts
-    /// it does not read): `worker` and where its body faces against `stations`, along
-    /// the routes round `obstacles` for [`RowLayout::RouteFacing`].
+    /// it does not read): `worker` and where its body faces against `stations`.
     pub fn blocks(
         self,
         worker: Option<&WorkerEstimate>,
         facing: Option<f32>,
         stations: &[Option<[f32; 2]>; NUM_CLASSES],
-        obstacles: &Obstacles,
     ) -> (Option<Vec<f32>>, Option<Vec<f32>>) {
-        let routed;
-        let stations = match (self, worker) {
-            (RowLayout::RouteFacing, Some(w)) => {
-                routed = obstacles.route_targets(w.position, stations);
-                &routed
-            }
-            _ => stations,
-        };
         let relations = self.reads_relations().then(|| {
             let mut r = vec![0.0; RELATION_DIM];
             floor::relations(worker, stations, &mut r);
             r
         });
-        let facing = self.reads_facing().then(|| {
+        let facing = (self == RowLayout::RelationsFacing).then(|| {
             let mut f = vec![0.0; FACING_DIM];
             floor::facing(worker, facing, stations, &mut f);
             f
@@ -128,7 +108,7 @@ impl TemporalModel {
             (RowLayout::Paper, TemporalModel::Ego) => EGO_DIM,
             (RowLayout::Paper, TemporalModel::Collective) => COLLECTIVE_DIM,
             (RowLayout::Relations, _) => RELATION_ROW_DIM,
-            (RowLayout::RelationsFacing | RowLayout::RouteFacing, _) => FACING_ROW_DIM,
+            (RowLayout::RelationsFacing, _) => FACING_ROW_DIM,
         }
     }
 }
@@ -141,7 +121,7 @@ pub struct Row {
     pub keypoints: Option<Vec<f32>>,
     /// The relation block, for [`RowLayout::Relations`] and with facing.
     pub relations: Option<Vec<f32>>,
-    /// The facing block, for the layouts that [`RowLayout::reads_facing`].
+    /// The facing block, for [`RowLayout::RelationsFacing`].
     pub facing: Option<Vec<f32>>,
     /// The peers' relation blocks (`slots` × `RELATION_DIM`), for a peer-set model.
     pub peers: Option<Vec<f32>>,
@@ -231,7 +211,7 @@ impl Window {
                 if let Some(r) = &row.relations {
                     slot[KEYPOINT_VALUES..RELATION_ROW_DIM].copy_from_slice(r);
                 }
-                if let (true, Some(f)) = (self.layout.reads_facing(), &row.facing) {
+                if let (RowLayout::RelationsFacing, Some(f)) = (self.layout, &row.facing) {
                     slot[RELATION_ROW_DIM..].copy_from_slice(f);
                 }
                 continue;
@@ -372,22 +352,13 @@ mod tests {
     fn each_layout_gets_the_blocks_it_reads() {
         let w = WorkerEstimate { position: [0.0, 0.0], velocity: [1.0, 0.0], covariance: [0.04, 0.0, 0.04] };
         let stations = [Some([5.0, 0.0]), None, None, None];
-        // A rack between the worker and the station, 1 m wide, from y = -0.5 to 3.
-        let rack = Obstacles::new([floor::Footprint { min: [2.0, -0.5], max: [3.0, 3.0] }]);
-        let blocks = |layout: RowLayout| layout.blocks(Some(&w), Some(0.0), &stations, &rack);
+        let blocks = |layout: RowLayout| layout.blocks(Some(&w), Some(0.0), &stations);
         assert_eq!(blocks(RowLayout::Paper), (None, None));
         let (r, f) = blocks(RowLayout::Relations);
         assert!(r.is_some_and(|r| r.len() == RELATION_DIM && r[0] == 1.0) && f.is_none());
         let (r, f) = blocks(RowLayout::RelationsFacing);
         assert!(r.is_some_and(|r| r[0] == 1.0));
         assert_eq!(f.unwrap()[..3], [1.0, 1.0, 0.0], "facing known, station 0 straight ahead");
-        // Along the route the station is farther, and the worker walking and facing
-        // straight at the rack heads off the way: its bearing turns to the right.
-        let (r, f) = blocks(RowLayout::RouteFacing);
-        let (r, f) = (r.unwrap(), f.unwrap());
-        let st = &r[floor::relations::TRACK_VALUES..];
-        assert!(st[0] == 1.0 && st[1] > 0.5, "route longer than 5 m: {st:?}");
-        assert!(st[4] < 0.99 && st[5] < 0.0 && f[2] < 0.0, "the route's first leg lies to the right: {st:?} {f:?}");
     }
 
     #[test]

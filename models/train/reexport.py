@@ -4,8 +4,8 @@ that leaves what it computes alone (no training, no new data).
 
     models/train/reexport.py models/default models/relations ...
 
-For each set whose rows are relation rows (`row` relations, relations_facing or
-route_facing in its manifest), each GRU file is read back into the matching nets.py module; PyTorch must
+For each set whose rows are relation rows (`row` relations or relations_facing in its
+manifest), each GRU file is read back into the matching nets.py module; PyTorch must
 reproduce the file's outputs on its reference inputs (reference.json) and on random
 rows to TOLERANCE, or nothing is written. The new export must match the old file the
 same way in onnxruntime; then it replaces the file. reference.json and the manifest
@@ -77,7 +77,7 @@ def scorer_for(manifest, path):
     horizon, inputs = manifest["horizon"], onnx.load(path).graph.input
     if len(inputs) > 1:
         return PeerSetScorer(horizon, slots=inputs[1].type.tensor_type.shape.dim[2].dim_value)
-    return FacingScorer(horizon) if manifest["row"] in ("relations_facing", "route_facing") else StationScorer(horizon)
+    return FacingScorer(horizon) if manifest["row"] == "relations_facing" else StationScorer(horizon)
 
 
 def feeds_of(reference, rng):
@@ -94,7 +94,7 @@ def worst(a, b):
 
 def reexport(set_dir):
     manifest = json.load(open(os.path.join(set_dir, "manifest.json")))
-    if manifest.get("row") not in ("relations", "relations_facing", "route_facing"):
+    if manifest.get("row") not in ("relations", "relations_facing"):
         print(f"{set_dir}: row {manifest.get('row')!r}, not a station scorer: left alone")
         return
     references = json.load(open(os.path.join(set_dir, "reference.json")))

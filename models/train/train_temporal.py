@@ -192,9 +192,6 @@ def main():
     rng = np.random.default_rng(a.seed)
     started = time.time()
     exports = [Export(p) for p in a.data]
-    routes = {bool(ex.desc.get("routes")) for ex in exports}
-    if len(routes) > 1 or (routes == {True} and not a.facing):
-        ap.error("exports with --routes are read by facing sets only, and all or none of the exports have them")
     all_seqs = [Sequences(ex, need_features=a.cnn1d) for ex in exports]
     name = os.path.basename(os.path.normpath(a.out))
     print(f"{name}: W {a.window}, frames {a.frames}, H {a.horizon}, scenarios {[s.scenario for s in all_seqs]}", flush=True)
@@ -240,15 +237,14 @@ def main():
         **({"frames": a.frames} if a.frames != a.window else {}),
         "horizon": a.horizon,
         "edge_weight": exports[0].desc["edge_weight"],
-        # an export with routes measured the relations along routes round the obstacles
-        **({"row": ("route_facing" if routes == {True} else "relations_facing") if a.facing else "relations"} if a.relations else {}),
+        **({"row": "relations_facing" if a.facing else "relations"} if a.relations else {}),
         **({"peer_slots": int(all_seqs[0].rel_peers.shape[-2])} if a.peer_set else {}),
         "consensus": {"alpha": 0.5, "beta": 0.5},
         "opset": OPSET,
         "dataset": {
             "exports": [
                 {
-                    **{k: ex.desc.get(k) for k in ("scenario", "episodes", "robots", "ticks_per_episode", "seed", "layouts", "routes")},
+                    **{k: ex.desc.get(k) for k in ("scenario", "episodes", "robots", "ticks_per_episode", "seed", "layouts")},
                     # the cameras and warm-ups the episodes ran under (sim/src/training_mix.rs)
                     "conditions": {k: v for k, v in ex.desc.get("conditions", {}).items() if k in ("track_share", "warm_share", "warm_up_max_s")},
                 }

@@ -1,22 +1,11 @@
 //! The simulated camera as an agent's configuration describes it: what a robot of a
 //! floor would be calibrated with. (Every generated floor uses the agent's default.)
-//! And the floor's obstacles as a robot that knows them would hold them.
 
-use spwi_agent::floor::{CameraCalibration, Footprint, Obstacles};
-use spwi_world::layout::{Camera, Layout};
-use spwi_world::world::Scenario;
+use spwi_agent::floor::CameraCalibration;
+use spwi_world::layout::Camera;
 
 pub fn of(cam: &Camera) -> CameraCalibration {
     CameraCalibration { fov_deg: cam.fov_deg, height_m: cam.height, image: cam.image }
-}
-
-/// The layout's own obstacle footprints, where the scenario has obstacles. Robots do
-/// not map obstacles yet, so a set whose rows read routes is trained and evaluated with
-/// these: what it scores is the most that routes can add, not what a fleet that maps
-/// its obstacles would reach.
-pub fn obstacles_of(layout: &Layout, scenario: Scenario) -> Obstacles {
-    let present = layout.obstacles.iter().filter(|_| scenario.obstacles());
-    Obstacles::new(present.map(|o| Footprint { min: o.min, max: o.max }))
 }
 
 #[cfg(test)]

@@ -44,7 +44,7 @@ use serde_json::json;
 use spwi_agent::floor::{self, FACING_DIM, RELATION_DIM};
 use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
 use spwi_agent::model::{Backend, Gcn};
-use spwi_agent::temporal::{normalise_keypoints, RowLayout};
+use spwi_agent::temporal::normalise_keypoints;
 use spwi_proto::{DetectionFrame, RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
 use spwi_world::generate::NamedLayout;
 use spwi_world::world::{Scenario, World};
@@ -78,9 +78,6 @@ pub struct DatasetOptions {
     pub human_features: bool,
     /// The cameras and warm-ups the episodes run under.
     pub mix: TrainingMix,
-    /// Measure the relation and facing arrays along each station's route round the
-    /// floor's obstacles (rows `route_facing`), the obstacles known from the layout.
-    pub routes: bool,
 }
 
 /// 0 train, 1 validation, 2 test: 60/20/20 by episode index.
@@ -230,10 +227,6 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         episode_conditions.push(conditions);
         let mut world = World::new(floor.clone(), o.scenario, seed, o.robots);
         let camera = crate::calibration::of(&floor.camera);
-        let (row_layout, obstacles) = match o.routes {
-            true => (RowLayout::RouteFacing, crate::calibration::obstacles_of(&floor, o.scenario)),
-            false => (RowLayout::RelationsFacing, floor::Obstacles::default()),
-        };
         let mut team_floor = match conditions.warm_up_ticks {
             0 => TeamFloor::new(camera.clone(), o.robots),
             ticks => TeamFloor::warmed(&floor, o.scenario, warm_up_seed(seed), o.robots, ticks)?,
@@ -305,13 +298,12 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             let (own, team) = team_floor.observe(&frames);
             for (slot, row) in tick_rows.iter_mut().enumerate() {
                 let v = team_floor.view(slot);
+                let (own_stations, team_stations) = (v.own_map.stations(), v.team_map.stations());
+                floor::relations(own[slot].as_ref(), &own_stations, &mut row.relations_ego);
+                floor::relations(team.as_ref(), &team_stations, &mut row.relations_team);
                 let facing = camera.facing_in(&frames[slot]);
-                let blocks = |worker, stations| {
-                    let (r, f) = row_layout.blocks(worker, facing, &stations, &obstacles);
-                    (r.expect("relation rows"), f.expect("facing rows"))
-                };
-                (row.relations_ego, row.facing_ego) = blocks(own[slot].as_ref(), v.own_map.stations());
-                (row.relations_team, row.facing_team) = blocks(team.as_ref(), v.team_map.stations());
+                floor::facing(own[slot].as_ref(), facing, &own_stations, &mut row.facing_ego);
+                floor::facing(team.as_ref(), facing, &team_stations, &mut row.facing_team);
             }
             let delivered: Vec<Vec<bool>> =
                 hears.iter().map(|row| row.iter().map(|&h| h && !rng.gen_bool(HEARD_LOSS)).collect()).collect();
@@ -437,7 +429,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 "split": ["uint8", ["rows"], "0 train, 1 validation, 2 test"],
                 "robot": ["uint8", ["rows"], "robot slot"],
                 "tick": ["uint32", ["rows"], "tick within the episode"],
-                "relations_ego": ["float32", ["rows", RELATION_DIM], "the worker's relations to the mapped stations from the robot's own track and map (agent/src/floor/relations.rs); with routes, along each station's route round the floor's obstacles (agent/src/floor/route.rs), as are relations_team and the facing arrays"],
+                "relations_ego": ["float32", ["rows", RELATION_DIM], "the worker's relations to the mapped stations from the robot's own track and map (agent/src/floor/relations.rs)"],
                 "relations_team": ["float32", ["rows", RELATION_DIM], "the same from the team's fused track and shared map, every robot of the episode a peer"],
                 "relations_heard": ["float32", ["rows", RELATION_DIM], format!("the same when the robot hears a random subset of the others (drawn per episode and robot: how many uniform in 0..robots-1, then which), each of their messages lost with probability {HEARD_LOSS}")],
                 "relations_peers": ["float32", ["rows", PEER_SLOTS, RELATION_DIM], "one relation block per peer heard in relations_heard: that peer's own estimate against the robot's team map; empty slots zero (floor::peer_set)"],
@@ -451,7 +443,6 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     });
     // (set apart: one json! of it all exceeds the macro's recursion limit)
     description["conditions"] = conditions;
-    description["routes"] = json!(o.routes);
     // Describe only the arrays this export wrote.
     let optional =
         [("embedding", o.gcn.is_some()), ("gcn_logits", o.gcn.is_some()), ("human_feature", o.human_features)];
@@ -509,11 +500,6 @@ pub struct DatasetArgs {
     /// The longest warm-up, seconds: each warm episode's is drawn uniformly up to it.
     #[arg(long, default_value_t = 0)]
     pub warm_up_max: u32,
-    /// Measure relations_ego, relations_team and the facing arrays along each
-    /// station's route round the floor's obstacles (for sets with `route_facing` rows;
-    /// the obstacles are the layout's: robots do not map them yet).
-    #[arg(long)]
-    pub routes: bool,
 }
 
 /// `spwi-sim dataset`: parses nothing more, runs the tool.
@@ -533,7 +519,6 @@ pub fn main(a: DatasetArgs) -> Result<()> {
         track_share,
         warm_share,
         warm_up_max,
-        routes,
     } = a;
     let mix = TrainingMix::new(track_share, warm_share, warm_up_max.saturating_mul(10))?;
     let floors = world.floors()?;
@@ -567,7 +552,6 @@ pub fn main(a: DatasetArgs) -> Result<()> {
         gcn,
         human_features,
         mix,
-        routes,
     })?;
     println!(
         "wrote {} ({samples} graph samples, {rows} temporal rows) in {:.1} s",
@@ -591,10 +575,6 @@ mod tests {
     }
 
     fn export_mixed(dir: &Path, gcn: Option<PathBuf>, mix: TrainingMix) -> (u64, u64) {
-        export_with(dir, gcn, mix, false)
-    }
-
-    fn export_with(dir: &Path, gcn: Option<PathBuf>, mix: TrainingMix, routes: bool) -> (u64, u64) {
         let _ = std::fs::remove_dir_all(dir);
         export(&DatasetOptions {
             scenario: Scenario::Dynamic,
@@ -611,7 +591,6 @@ mod tests {
             gcn,
             human_features: true,
             mix,
-            routes,
         })
         .unwrap()
     }
@@ -662,46 +641,6 @@ mod tests {
         };
         let (k_cold, k_warm) = (known(&cold), known(&warm));
         assert!(k_warm > k_cold + 10, "stations known in the first second: warm {k_warm}, cold {k_cold}");
-        std::fs::remove_dir_all(base).unwrap();
-    }
-
-    /// The float rows of a temporal array of the export in `dir`, `width` values each.
-    fn rows_of(dir: &Path, name: &str, width: usize) -> Vec<Vec<f32>> {
-        let bytes = npy_data(dir, &format!("temporal/{name}.npy"));
-        let values: Vec<f32> = bytes.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect();
-        values.chunks_exact(width).map(<[f32]>::to_vec).collect()
-    }
-
-    #[test]
-    fn routes_lengthen_the_way_to_stations_behind_obstacles_and_change_nothing_else() {
-        let base = std::env::temp_dir().join(format!("spwi-dataset-routes-{}", std::process::id()));
-        let (straight, routed) = (base.join("straight"), base.join("routed"));
-        // Maps warm from a minute of work, so stations are known from the first tick.
-        let warm = TrainingMix::new(0.0, 1.0, 600).unwrap();
-        export_with(&straight, None, warm, false);
-        export_with(&routed, None, warm, true);
-        let d: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(routed.join("dataset.json")).unwrap()).unwrap();
-        assert_eq!(d["routes"], true);
-        assert_eq!(npy_data(&straight, "temporal/keypoints.npy"), npy_data(&routed, "temporal/keypoints.npy"));
-        // Per station: a route is never shorter than the straight line, and on the
-        // built-in floor (two obstacles) some are longer.
-        let (a, b) =
-            (rows_of(&straight, "relations_team", RELATION_DIM), rows_of(&routed, "relations_team", RELATION_DIM));
-        let (mut longer, mut compared) = (0, 0);
-        for (a, b) in a.iter().zip(&b) {
-            assert_eq!(a[..floor::relations::TRACK_VALUES], b[..floor::relations::TRACK_VALUES], "track values");
-            for s in 0..NUM_CLASSES {
-                let at = floor::relations::TRACK_VALUES + s * floor::relations::PER_STATION;
-                assert_eq!(a[at], b[at], "known");
-                if a[at] == 1.0 {
-                    compared += 1;
-                    assert!(b[at + 1] >= a[at + 1] - 1e-6, "a route shorter than the straight line");
-                    longer += usize::from(b[at + 1] > a[at + 1] + 0.01);
-                }
-            }
-        }
-        assert!(longer > 0 && longer < compared, "{longer} of {compared} station rows longer by route");
         std::fs::remove_dir_all(base).unwrap();
     }
 

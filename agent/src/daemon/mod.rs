@@ -52,14 +52,6 @@ pub struct Options {
 /// Loads the model set named by the config.
 pub fn load_models(cfg: &AgentConfig) -> Result<Arc<ModelSet>> {
     let set = ModelSet::load(&cfg.models.dir, cfg.models.backend, cfg.models.ort_library.as_deref())?;
-    if set.manifest.row == crate::temporal::RowLayout::RouteFacing {
-        anyhow::bail!(
-            "model set {}: its rows are \"route_facing\" (relations along routes round the floor's obstacles), \
-             and this daemon does not map obstacles, so it cannot build the `window` input; use a set with \
-             \"relations_facing\" rows (models/default)",
-            set.dir.display()
-        );
-    }
     if set.manifest.fixture {
         tracing::warn!(dir = %set.dir.display(), "running FIXTURE models (random weights): decisions are plumbing tests, not predictions");
     }

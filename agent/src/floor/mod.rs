@@ -9,8 +9,6 @@
 //! any robot build a shared map ([`stations`]), and the temporal model reads the
 //! worker's relation to every mapped station ([`relations`]) — distance, bearing
 //! relative to the worker's motion, closing speed — never where a station stands.
-//! A set that reads routes measures those relations along the way a person walks round
-//! the obstacles ([`route`]) instead of the straight line.
 //!
 //! [`FloorView`] holds one robot's part of all this; the engine, the dataset export
 //! and the evaluation's observers all use it, so training and serving compute the same
@@ -18,38 +16,29 @@
 
 pub mod calibration;
 pub mod relations;
-pub mod route;
 pub mod stations;
 pub mod track;
 
 pub use calibration::CameraCalibration;
 pub use relations::{facing, peer_set, relations, FACING_DIM, RELATION_DIM};
-pub use route::{Footprint, Obstacles};
 pub use stations::StationMap;
 pub use track::{agrees_with_most, fuse, Track};
 
 use spwi_proto::{DetectionFrame, Landmark, WorkerEstimate};
 
 /// One robot's floor-frame state: its own worker track, the map of what it saw
-/// itself, the map of what the whole team saw, and the obstacles it knows.
+/// itself and the map of what the whole team saw.
 #[derive(Debug, Clone)]
 pub struct FloorView {
     camera: CameraCalibration,
     track: Track,
     pub own_map: StationMap,
     pub team_map: StationMap,
-    pub obstacles: Obstacles,
 }
 
 impl FloorView {
     pub fn new(camera: CameraCalibration) -> Self {
-        FloorView {
-            camera,
-            track: Track::default(),
-            own_map: StationMap::default(),
-            team_map: StationMap::default(),
-            obstacles: Obstacles::default(),
-        }
+        FloorView { camera, track: Track::default(), own_map: StationMap::default(), team_map: StationMap::default() }
     }
 
     pub fn camera(&self) -> &CameraCalibration {

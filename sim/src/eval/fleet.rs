@@ -12,7 +12,7 @@ use super::EvalOptions;
 use crate::faulty_camera::{LoopingCamera, StuckCamera};
 use anyhow::Result;
 use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
-use spwi_agent::temporal::{RowLayout, TemporalModel};
+use spwi_agent::temporal::TemporalModel;
 use spwi_agent::vote;
 use spwi_proto::{encode, RobotId, Station, WorkerPhase, NUM_CLASSES};
 use spwi_world::geometry::{norm, sub};
@@ -323,11 +323,7 @@ fn engine(slot: usize, o: &EvalOptions, layout: &Layout) -> Result<Engine> {
     let id = RobotId::new(format!("r{slot}"))?;
     let camera = crate::calibration::of(&layout.camera);
     let cfg = EngineConfig::new(id, slot as u64 + 1, &o.tick, &camera, &o.models.manifest);
-    let mut engine = Engine::new(cfg, o.models.inference(TemporalModel::Collective)?);
-    if o.models.manifest.row == RowLayout::RouteFacing {
-        engine.adopt_obstacles(crate::calibration::obstacles_of(layout, o.scenario));
-    }
-    Ok(engine)
+    Ok(Engine::new(cfg, o.models.inference(TemporalModel::Collective)?))
 }
 
 /// The network of an evaluation: loopback-like (0.5 ms ± 0.5 ms) unless `--delay`.

@@ -93,7 +93,7 @@ impl Observers {
     pub fn see(&mut self, frame: &DetectionFrame) {
         let t = frame.tick;
         self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
-        self.facing = self.row_layout.reads_facing().then(|| self.camera.facing_in(frame)).flatten();
+        self.facing = (self.row_layout == RowLayout::RelationsFacing).then(|| self.camera.facing_in(frame)).flatten();
         if self.cnn1d.is_some() {
             if let Some(g) = self.graph.build(frame) {
                 let mut row = g.x[..NODE_FEATURE_DIM].to_vec(); // node 0: the worker
@@ -121,8 +121,7 @@ impl Observers {
     ) -> Result<Predictions> {
         let seen = embedding.is_some();
         let (worker, stations) = (floor_view.own_estimate(t), floor_view.own_map.stations());
-        let (relations, facing) =
-            self.row_layout.blocks(worker.as_ref(), self.facing.take(), &stations, &floor_view.obstacles);
+        let (relations, facing) = self.row_layout.blocks(worker.as_ref(), self.facing.take(), &stations);
         let row = Row { own: embedding, keypoints: self.keypoints.take(), relations, facing, ..Row::default() };
         self.ego_rows.insert(t, row);
         let mut out = Predictions::default();
