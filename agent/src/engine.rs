@@ -234,7 +234,6 @@ pub struct Engine {
     graph: GraphBuilder,
     window: Window,
     row_layout: RowLayout,
-    shared_facing: Option<(u64, Option<f32>)>,
     floor: FloorView,
     scratch: Vec<f32>,
     /// The peer input of a collective model with a peer set.
@@ -290,7 +289,6 @@ impl Engine {
             graph,
             window,
             row_layout,
-            shared_facing: None,
             floor,
             scratch: Vec::new(),
             scratch_peers: Vec::new(),
@@ -331,11 +329,6 @@ impl Engine {
     pub fn adopt_maps(&mut self, own: StationMap, team: StationMap) {
         self.floor.own_map = own;
         self.floor.team_map = team;
-    }
-
-    /// EXPERIMENT: the team's fused facing for `tick`, used instead of our own.
-    pub fn share_facing(&mut self, tick: u64, facing: Option<f32>) {
-        self.shared_facing = Some((tick, facing));
     }
 
     /// Our own feed repeats itself: we set it aside until it changes.
@@ -480,13 +473,8 @@ impl Engine {
         let visibility = f.visibility();
         let quality = vote::view_quality(&f);
         let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
-        let mut facing =
+        let facing =
             (self.row_layout == RowLayout::RelationsFacing).then(|| self.floor.camera().facing_in(&f)).flatten();
-        if let Some((t, shared)) = self.shared_facing {
-            if t == f.tick && self.row_layout == RowLayout::RelationsFacing {
-                facing = shared;
-            }
-        }
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
         let will_vote = embedding.is_some() || (self.row_layout.reads_relations() && worker.is_some());

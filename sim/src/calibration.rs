@@ -8,20 +8,6 @@ pub fn of(cam: &Camera) -> CameraCalibration {
     CameraCalibration { fov_deg: cam.fov_deg, height_m: cam.height, image: cam.image }
 }
 
-/// EXPERIMENT: the circular mean of every frame's facing of the worker.
-pub fn fused_facing<'a>(
-    camera: &CameraCalibration,
-    frames: impl Iterator<Item = &'a spwi_proto::DetectionFrame>,
-) -> Option<f32> {
-    let (mut c, mut s, mut n) = (0.0f32, 0.0f32, 0);
-    for f in frames.filter_map(|f| camera.facing_in(f)) {
-        c += f.cos();
-        s += f.sin();
-        n += 1;
-    }
-    (n > 0 && c.hypot(s) > 1e-3).then(|| s.atan2(c))
-}
-
 #[cfg(test)]
 mod tests {
     #[test]

@@ -296,8 +296,6 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             // What each robot's engine computes at its vote step, every other robot of
             // the episode being a peer whose estimate and landmarks arrived.
             let (own, team) = team_floor.observe(&frames);
-            let shared_facing = std::env::var_os("SPWI_SHARED_FACING").is_some();
-            let fused = crate::calibration::fused_facing(&camera, frames.iter());
             for (slot, row) in tick_rows.iter_mut().enumerate() {
                 let v = team_floor.view(slot);
                 let (own_stations, team_stations) = (v.own_map.stations(), v.team_map.stations());
@@ -305,8 +303,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 floor::relations(team.as_ref(), &team_stations, &mut row.relations_team);
                 let facing = camera.facing_in(&frames[slot]);
                 floor::facing(own[slot].as_ref(), facing, &own_stations, &mut row.facing_ego);
-                let team_facing = if shared_facing { fused } else { facing };
-                floor::facing(team.as_ref(), team_facing, &team_stations, &mut row.facing_team);
+                floor::facing(team.as_ref(), facing, &team_stations, &mut row.facing_team);
             }
             let delivered: Vec<Vec<bool>> =
                 hears.iter().map(|row| row.iter().map(|&h| h && !rng.gen_bool(HEARD_LOSS)).collect()).collect();

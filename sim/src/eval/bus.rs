@@ -64,10 +64,6 @@ impl Bus {
         bus
     }
 
-    pub fn engine_mut(&mut self, slot: usize) -> &mut Engine {
-        &mut self.engines[slot]
-    }
-
     pub fn engine(&self, slot: usize) -> &Engine {
         &self.engines[slot]
     }

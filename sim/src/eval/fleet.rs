@@ -386,8 +386,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
         }
         // Every live robot's camera delivers its frame to its engine.
-        let mut frames = Vec::new();
-        for slot in 0..n {
+        for (slot, obs) in observers.iter_mut().enumerate() {
             if !bus.is_live(slot) {
                 continue;
             }
@@ -397,17 +396,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             } else if slot < o.faults.lying() {
                 frame = looping[slot].pass(frame);
             }
-            frames.push((slot, frame));
-        }
-        if std::env::var_os("SPWI_SHARED_FACING").is_some() {
-            let camera = crate::calibration::of(&layout.camera);
-            let fused = crate::calibration::fused_facing(&camera, frames.iter().map(|(_, f)| f));
-            for (slot, _) in &frames {
-                bus.engine_mut(*slot).share_facing(tick, fused);
-            }
-        }
-        for (slot, frame) in frames {
-            observers[slot].see(&frame);
+            obs.see(&frame);
             bus.deliver(slot, Input::Frame(frame), now);
             tallies.frames += 1;
         }
