@@ -135,6 +135,7 @@ fn bench_codec() {
         visibility: 13,
         votes: true,
         worker: Some(WorkerEstimate { position: [3.0, 4.0], velocity: [1.0, 0.2], covariance: [0.05, 0.01, 0.2] }),
+        facing: Some(1.2),
         landmarks: Station::ALL
             .map(|s| Landmark { station: s, position: [s.index() as f32, 2.0], sigma: 0.4 })
             .to_vec(),

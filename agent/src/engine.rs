@@ -169,8 +169,7 @@ struct Own {
     keypoints: Option<Vec<f32>>,
     /// Our own track's estimate of the worker for this tick.
     worker: Option<WorkerEstimate>,
-    /// Where our frame shows the worker's body facing (floor frame, radians), for
-    /// rows with facing.
+    /// Where our frame shows the worker's body facing (floor frame, radians).
     facing: Option<f32>,
     /// We vote for this tick: we see the worker, or (relation rows) we track it.
     will_vote: bool,
@@ -186,6 +185,8 @@ struct Tick {
     embeddings: BTreeMap<RobotId, Option<Vec<f32>>>,
     /// Peers' estimates of the worker for the tick.
     workers: BTreeMap<RobotId, WorkerEstimate>,
+    /// Where peers saw the worker's body facing in the tick.
+    facings: BTreeMap<RobotId, f32>,
     /// Peers that said they will not vote for the tick.
     abstaining: BTreeSet<RobotId>,
     votes: BTreeMap<RobotId, VoteMsg>,
@@ -202,6 +203,7 @@ impl Tick {
             own: None,
             embeddings: BTreeMap::new(),
             workers: BTreeMap::new(),
+            facings: BTreeMap::new(),
             abstaining: BTreeSet::new(),
             votes: BTreeMap::new(),
             relayed: false,
@@ -473,8 +475,8 @@ impl Engine {
         let visibility = f.visibility();
         let quality = vote::view_quality(&f);
         let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
-        let facing =
-            (self.row_layout == RowLayout::RelationsFacing).then(|| self.floor.camera().facing_in(&f)).flatten();
+        // Shared whatever our set reads: a peer's set may read the team's facing.
+        let facing = self.floor.camera().facing_in(&f);
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
         let will_vote = embedding.is_some() || (self.row_layout.reads_relations() && worker.is_some());
@@ -486,6 +488,7 @@ impl Engine {
             visibility,
             votes: will_vote,
             worker,
+            facing,
             landmarks,
         }));
         let tick = self.open_tick(f.tick, now);
@@ -525,6 +528,9 @@ impl Engine {
             } else {
                 if let Some(w) = e.worker {
                     tick.workers.insert(e.robot.clone(), w);
+                }
+                if let Some(f) = e.facing {
+                    tick.facings.insert(e.robot.clone(), f);
                 }
                 tick.embeddings.insert(e.robot.clone(), e.embedding);
             }
@@ -658,6 +664,9 @@ impl Engine {
         let trust = &self.trust;
         let fused = |i: usize| agrees.as_ref().is_none_or(|a| a[i]) && (robots[i] == me || trust.fuses(robots[i]));
         let team_worker = floor::fuse((0..estimates.len()).filter(|&i| fused(i)).map(|i| estimates[i]));
+        // The team's facing: that of the robots whose estimates make its track.
+        let facing_of = |i: usize| if robots[i] == me { own.facing } else { tick.facings.get(robots[i]).copied() };
+        let team_facing = floor::fuse_facings((0..estimates.len()).filter(|&i| fused(i)).filter_map(facing_of));
         // A peer-set model also reads each fused peer's own estimate.
         let slots = self.inference.peer_slots();
         let fused_peers: Vec<&WorkerEstimate> =
@@ -671,12 +680,12 @@ impl Engine {
         }
         self.floor.observe_worker(own.worker.as_ref(), team_worker.as_ref());
         let will_vote = own.will_vote;
-        // The ego model reads our own track and map, the collective the team's.
-        let (worker, stations) = match self.cfg.temporal {
-            TemporalModel::Ego => (own.worker.as_ref(), self.floor.own_map.stations()),
-            TemporalModel::Collective => (team_worker.as_ref(), self.floor.team_map.stations()),
+        // The ego model reads our own track, facing and map, the collective the team's.
+        let (worker, facing, stations) = match self.cfg.temporal {
+            TemporalModel::Ego => (own.worker.as_ref(), own.facing, self.floor.own_map.stations()),
+            TemporalModel::Collective => (team_worker.as_ref(), team_facing, self.floor.team_map.stations()),
         };
-        let (relations, facing) = self.row_layout.blocks(worker, own.facing, &stations);
+        let (relations, facing) = self.row_layout.blocks(worker, facing, &stations);
         let peers = (slots > 0).then(|| {
             let mut p = vec![0.0; slots * RELATION_DIM];
             floor::peer_set(&fused_peers, &self.floor.team_map.stations(), slots, &mut p);
@@ -886,6 +895,7 @@ pub(crate) mod tests {
             visibility: 3,
             votes,
             worker,
+            facing: None,
             landmarks: Vec::new(),
         }
     }
@@ -974,6 +984,7 @@ pub(crate) mod tests {
                 visibility: 0,
                 votes: false,
                 worker: None,
+                facing: None,
                 landmarks: vec![],
             }),
             ms(1),
@@ -1006,6 +1017,7 @@ pub(crate) mod tests {
                     visibility: 0,
                     votes: false,
                     worker: None,
+                    facing: None,
                     landmarks: vec![],
                 }),
                 ms(0),
@@ -1022,6 +1034,7 @@ pub(crate) mod tests {
                 visibility: 1,
                 votes: false,
                 worker: None,
+                facing: None,
                 landmarks: vec![],
             }),
             ms(101),
@@ -1092,6 +1105,7 @@ pub(crate) mod tests {
             visibility: 1,
             votes: false,
             worker: None,
+            facing: None,
             landmarks: vec![Landmark { station: Station::Manufacturing, position: [9.0, 9.0], sigma: 0.3 }; 3],
         };
         a.handle(Input::Embedding(peer), ms(401));
@@ -1172,29 +1186,58 @@ pub(crate) mod tests {
         assert_eq!(decisions(&out).len(), 1, "a said it abstains from tick 21: b decides at once");
     }
 
-    #[test]
-    fn a_facing_set_reads_where_its_own_frame_shows_the_worker_facing() {
+    /// The last row of a collective window at tick `t`, as the GRU reads it.
+    fn last_row(e: &Engine, t: u64) -> Vec<f32> {
+        let mut x = Vec::new();
+        e.window.input(t, TemporalModel::Collective, &mut x);
+        x.split_off(x.len() - temporal::FACING_ROW_DIM)
+    }
+
+    fn default_set() -> Arc<ModelSet> {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/default");
         let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
         assert_eq!(set.manifest.row, RowLayout::RelationsFacing);
+        set
+    }
+
+    fn localised(robot: &str, tick: u64, seen: bool) -> DetectionFrame {
+        DetectionFrame { pose: Some(FloorPose { position: [1.0, 2.0], heading: 0.5 }), ..frame(robot, tick, seen) }
+    }
+
+    #[test]
+    fn the_collective_reads_the_facing_its_peers_saw() {
+        let set = default_set();
+        let (mut a, mut b) = (engine("a", &set), engine("b", &set));
+        b.handle(Input::MemberJoined(id("a")), ms(0));
+        // a sees the worker, b does not: b's team track and facing are a's.
+        let mut facing = None;
+        for t in 1..=4 {
+            let e = take_embedding(&a.handle(Input::Frame(localised("a", t, true)), ms(100 * t)));
+            facing = e.facing;
+            let e = if t == 4 { e } else { EmbeddingMsg { facing: None, ..e } };
+            b.handle(Input::Embedding(e), ms(100 * t));
+            let out = b.handle(Input::Frame(localised("b", t, false)), ms(100 * t + 1));
+            assert!(take_embedding(&out).facing.is_none(), "b's frame shows no worker");
+        }
+        assert!(facing.is_some(), "a's frame shows the worker's shoulders: a shares where it faces");
+        let (three, four) = (last_row(&b, 3), last_row(&b, 4));
+        assert_eq!(three[KEYPOINT_VALUES], 1.0, "b holds the team's track from a's estimate");
+        assert_eq!(three[temporal::RELATION_ROW_DIM], 0.0, "a sent no facing for tick 3");
+        assert_eq!(four[temporal::RELATION_ROW_DIM], 1.0, "b reads the facing a saw in tick 4");
+    }
+
+    #[test]
+    fn a_facing_set_reads_where_its_own_frame_shows_the_worker_facing() {
+        let set = default_set();
         let mut a = engine("a", &set);
-        let localised = |tick, seen| DetectionFrame {
-            pose: Some(FloorPose { position: [1.0, 2.0], heading: 0.5 }),
-            ..frame("a", tick, seen)
-        };
-        let last_row = |e: &Engine, t: u64| {
-            let mut x = Vec::new();
-            e.window.input(t, TemporalModel::Collective, &mut x);
-            x.split_off(x.len() - temporal::FACING_ROW_DIM)
-        };
         for t in 1..=3 {
-            take_vote(&a.handle(Input::Frame(localised(t, true)), ms(100 * t)));
+            take_vote(&a.handle(Input::Frame(localised("a", t, true)), ms(100 * t)));
         }
         let row = last_row(&a, 3);
         assert_eq!(row[KEYPOINT_VALUES], 1.0, "the worker is tracked");
         assert_eq!(row[temporal::RELATION_ROW_DIM], 1.0, "and its facing known from the frame");
         // Not seen: the fresh track still votes, but nothing shows where it faces.
-        take_vote(&a.handle(Input::Frame(localised(4, false)), ms(400)));
+        take_vote(&a.handle(Input::Frame(localised("a", 4, false)), ms(400)));
         let row = last_row(&a, 4);
         assert_eq!((row[KEYPOINT_VALUES], row[temporal::RELATION_ROW_DIM]), (1.0, 0.0));
     }

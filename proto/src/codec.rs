@@ -14,8 +14,8 @@ use serde::Serialize;
 /// Bumped on every incompatible change of any payload (2: robot pose in the detection
 /// frame, worker estimate and landmarks in the embedding message; 3: relayed ballots,
 /// the ballot digest in the decision; 4: the voter's standing and view quality in the
-/// vote).
-pub const PROTOCOL_VERSION: u16 = 5;
+/// vote; 5: the voter's signature; 6: the worker's facing in the embedding message).
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -182,6 +182,48 @@ mod tests {
         let e = decode::<EmbeddingMsg>(&b).unwrap_err();
         assert!(matches!(e, DecodeError::UnknownVersion { got: 1, .. }), "{e}");
         assert!(e.to_string().contains("protocol version 1"), "{e}");
+    }
+
+    #[test]
+    fn a_version_5_embedding_without_the_facing_is_refused_and_a_facing_must_be_finite() {
+        #[derive(serde::Serialize)]
+        struct EmbeddingV5 {
+            robot: RobotId,
+            instance: u64,
+            tick: u64,
+            embedding: Option<Vec<f32>>,
+            visibility: u32,
+            votes: bool,
+            worker: Option<WorkerEstimate>,
+            landmarks: Vec<Landmark>,
+        }
+        let old = EmbeddingV5 {
+            robot: RobotId::new("r1").unwrap(),
+            instance: 1,
+            tick: 9,
+            embedding: None,
+            visibility: 3,
+            votes: false,
+            worker: None,
+            landmarks: Vec::new(),
+        };
+        let b = bincode::serde::encode_to_vec((5u16, old), CONFIG).unwrap();
+        assert!(matches!(decode::<EmbeddingMsg>(&b), Err(DecodeError::UnknownVersion { got: 5, .. })));
+        let mut now = EmbeddingMsg {
+            robot: RobotId::new("r1").unwrap(),
+            instance: 1,
+            tick: 9,
+            embedding: None,
+            visibility: 3,
+            votes: true,
+            worker: None,
+            facing: Some(-2.5),
+            landmarks: Vec::new(),
+        };
+        assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
+        now.facing = Some(f32::NAN);
+        let e = decode::<EmbeddingMsg>(&encode(&now)).unwrap_err().to_string();
+        assert!(e.contains("field `facing`") && e.contains("NaN"), "{e}");
     }
 
     #[test]

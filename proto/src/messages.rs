@@ -272,9 +272,10 @@ impl Validate for MapMsg {
 /// `embedding` is `None` when the robot does not see the worker this tick. `votes`
 /// says whether it will vote for the tick (it sees the worker, or its model set votes
 /// from its track of the worker while that is fresh); peers do not wait for the vote
-/// of a robot that will not. `worker` and `landmarks` are
+/// of a robot that will not. `worker`, `facing` and `landmarks` are
 /// what the robot knows in the floor frame (empty when it is not localised): the
-/// team fuses them into one worker track and one map of the stations.
+/// team fuses them into one worker track, one facing of the worker's body and one
+/// map of the stations.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EmbeddingMsg {
     pub robot: RobotId,
@@ -285,6 +286,10 @@ pub struct EmbeddingMsg {
     pub visibility: u32,
     pub votes: bool,
     pub worker: Option<WorkerEstimate>,
+    /// Where the robot's frame shows the worker's body facing this tick (radians,
+    /// counter-clockwise from the floor's x axis); `None` when its frame does not show
+    /// the shoulders or hips, or the robot is not localised.
+    pub facing: Option<f32>,
     pub landmarks: Vec<Landmark>,
 }
 
@@ -295,6 +300,9 @@ impl Validate for EmbeddingMsg {
         }
         if let Some(w) = &self.worker {
             w.validate()?;
+        }
+        if let Some(f) = self.facing {
+            finite("facing", &[f])?;
         }
         if self.landmarks.len() > MAX_LANDMARKS {
             return Err(invalid("landmarks", format!("{} landmarks, at most {MAX_LANDMARKS}", self.landmarks.len())));

@@ -70,10 +70,11 @@ proptest! {
     fn embeddings_round_trip(robot in robot(), instance in any::<u64>(), tick in any::<u64>(),
                              e in prop::option::of(prop::collection::vec(finite(), EMBEDDING_DIM)), visibility in any::<u32>(),
                              worker in prop::option::of((finite(), finite(), finite(), finite(), 0.01f32..10.0, -0.5f32..0.5, 1.0f32..10.0)),
+                             facing in prop::option::of(finite()),
                              landmarks in prop::collection::vec((station(), finite(), finite(), 0.01f32..5.0), 0..8)) {
         let worker = worker.map(|(x, y, vx, vy, pp, pv, vv)| WorkerEstimate { position: [x, y], velocity: [vx, vy], covariance: [pp, pv * pp.sqrt(), vv] });
         let landmarks = landmarks.into_iter().map(|(station, x, y, sigma)| Landmark { station, position: [x, y], sigma }).collect();
-        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, votes: visibility % 2 == 0, worker, landmarks };
+        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, votes: visibility % 2 == 0, worker, facing, landmarks };
         prop_assert_eq!(decode::<EmbeddingMsg>(&encode(&m)).unwrap(), m);
     }
 

@@ -21,8 +21,9 @@
 //!   probability [`HEARD_LOSS`]) beside one relation block per heard peer
 //!   (`relations_peers`, [`PEER_SLOTS`] slots) — what its engine holds when its fleet
 //!   is that small or its links that lossy; and where the worker's body faces, from
-//!   the robot's own keypoints, against the stations of its own map and track
-//!   (`facing_ego`) and of the team's (`facing_team`) ([`floor::facing`]). With
+//!   the robot's own keypoints against the stations of its own map and track
+//!   (`facing_ego`), and fused over the team's robots against the team's map and
+//!   track (`facing_team`) ([`floor::facing`], [`floor::fuse_facings`]). With
 //!   `--human-features`, also the worker node's 1024-d feature (the 1D-CNN baseline's
 //!   input; 4 KB a row, so only when asked).
 //!
@@ -295,15 +296,15 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             }
             // What each robot's engine computes at its vote step, every other robot of
             // the episode being a peer whose estimate and landmarks arrived.
-            let (own, team) = team_floor.observe(&frames);
-            for (slot, row) in tick_rows.iter_mut().enumerate() {
+            let all = team_floor.observe(&frames);
+            for (slot, (row, h)) in tick_rows.iter_mut().zip(&all).enumerate() {
                 let v = team_floor.view(slot);
                 let (own_stations, team_stations) = (v.own_map.stations(), v.team_map.stations());
-                floor::relations(own[slot].as_ref(), &own_stations, &mut row.relations_ego);
-                floor::relations(team.as_ref(), &team_stations, &mut row.relations_team);
+                floor::relations(h.own.as_ref(), &own_stations, &mut row.relations_ego);
+                floor::relations(h.team.as_ref(), &team_stations, &mut row.relations_team);
                 let facing = camera.facing_in(&frames[slot]);
-                floor::facing(own[slot].as_ref(), facing, &own_stations, &mut row.facing_ego);
-                floor::facing(team.as_ref(), facing, &team_stations, &mut row.facing_team);
+                floor::facing(h.own.as_ref(), facing, &own_stations, &mut row.facing_ego);
+                floor::facing(h.team.as_ref(), h.facing, &team_stations, &mut row.facing_team);
             }
             let delivered: Vec<Vec<bool>> =
                 hears.iter().map(|row| row.iter().map(|&h| h && !rng.gen_bool(HEARD_LOSS)).collect()).collect();
@@ -434,7 +435,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 "relations_heard": ["float32", ["rows", RELATION_DIM], format!("the same when the robot hears a random subset of the others (drawn per episode and robot: how many uniform in 0..robots-1, then which), each of their messages lost with probability {HEARD_LOSS}")],
                 "relations_peers": ["float32", ["rows", PEER_SLOTS, RELATION_DIM], "one relation block per peer heard in relations_heard: that peer's own estimate against the robot's team map; empty slots zero (floor::peer_set)"],
                 "facing_ego": ["float32", ["rows", FACING_DIM], "where the worker's body faces (from the robot's own keypoints) against the stations of its own map, from its own track (agent/src/floor/relations.rs, facing)"],
-                "facing_team": ["float32", ["rows", FACING_DIM], "the same against the team's fused track and shared map"],
+                "facing_team": ["float32", ["rows", FACING_DIM], "the team's facing (circular mean of its robots', agent/src/floor/relations.rs, fuse_facings) against the team's fused track and shared map"],
                 "embedding": ["float32", ["rows", EMBEDDING_DIM], "GCN embedding of the worker node (only with --gcn; zeros when not seen)"],
                 "gcn_logits": ["float32", ["rows", NUM_CLASSES], "GCN logits (only with --gcn; zeros when not seen)"],
                 "human_feature": ["float32", ["rows", NODE_FEATURE_DIM], "the worker node's feature, global ‖ local (only with --human-features; zeros when not seen)"],

@@ -1,6 +1,6 @@
 //! What every robot of a fleet knows on the floor when each hears every other: each
 //! robot's [`FloorView`] fed its own frames, its peers' landmarks and the team's
-//! fused worker track — what each engine's floor holds when no message is lost. The
+//! fused worker track and facing — what each engine holds when no message is lost. The
 //! dataset export computes its training rows from it, and [`TeamFloor::warmed`] lets an
 //! evaluation start from the maps of a fleet that has worked on the floor before.
 //!
@@ -29,6 +29,9 @@ pub struct Heard {
     pub team: Option<WorkerEstimate>,
     /// The peers' estimates in that fusion.
     pub peers: Vec<WorkerEstimate>,
+    /// The team's facing of the worker: that of the robots whose estimates make the
+    /// team's track ([`floor::fuse_facings`]).
+    pub facing: Option<f32>,
 }
 
 impl TeamFloor {
@@ -36,12 +39,9 @@ impl TeamFloor {
         TeamFloor { views: vec![FloorView::new(camera); robots] }
     }
 
-    /// One tick: every robot's frame (by slot) in. Returns each robot's own estimate of
-    /// the worker and the team's fused one.
-    pub fn observe(&mut self, frames: &[DetectionFrame]) -> (Vec<Option<WorkerEstimate>>, Option<WorkerEstimate>) {
-        let heard = self.observe_heard(frames, |_, _| true);
-        let team = heard.first().and_then(|h| h.team);
-        (heard.into_iter().map(|h| h.own).collect(), team)
+    /// One tick in which every robot hears every other: every robot's frame (by slot) in.
+    pub fn observe(&mut self, frames: &[DetectionFrame]) -> Vec<Heard> {
+        self.observe_heard(frames, |_, _| true)
     }
 
     /// One tick in which robot `listener` hears robot `speaker` only if
@@ -50,6 +50,7 @@ impl TeamFloor {
     /// most others contradict — as an engine does with the messages that reached it.
     pub fn observe_heard(&mut self, frames: &[DetectionFrame], hears: impl Fn(usize, usize) -> bool) -> Vec<Heard> {
         let shared: Vec<_> = self.views.iter_mut().zip(frames).map(|(v, f)| v.observe(f)).collect();
+        let facings: Vec<Option<f32>> = self.views.iter().zip(frames).map(|(v, f)| v.camera().facing_in(f)).collect();
         let mut heard = Vec::with_capacity(self.views.len());
         for (slot, view) in self.views.iter_mut().enumerate() {
             let peers: Vec<usize> = (0..shared.len()).filter(|&p| p != slot && hears(slot, p)).collect();
@@ -57,19 +58,20 @@ impl TeamFloor {
                 view.add_peer_landmarks(&shared[p].1);
             }
             let own = shared[slot].0;
-            // (is a peer's, estimate): ours first, as the engine orders them.
-            let estimates: Vec<(bool, &WorkerEstimate)> = own
+            // (robot, estimate): ours first, as the engine orders them.
+            let estimates: Vec<(usize, &WorkerEstimate)> = own
                 .iter()
-                .map(|e| (false, e))
-                .chain(peers.iter().filter_map(|&p| shared[p].0.as_ref()).map(|e| (true, e)))
+                .map(|e| (slot, e))
+                .chain(peers.iter().filter_map(|&p| shared[p].0.as_ref().map(|e| (p, e))))
                 .collect();
             let agrees = floor::agrees_with_most(&estimates.iter().map(|(_, e)| *e).collect::<Vec<_>>());
-            let kept: Vec<(bool, &WorkerEstimate)> =
+            let kept: Vec<(usize, &WorkerEstimate)> =
                 (0..estimates.len()).filter(|&i| agrees.as_ref().is_none_or(|a| a[i])).map(|i| estimates[i]).collect();
             let team = floor::fuse(kept.iter().map(|(_, e)| *e));
-            let peers = kept.iter().filter(|(peer, _)| *peer).map(|(_, e)| **e).collect();
+            let facing = floor::fuse_facings(kept.iter().filter_map(|&(robot, _)| facings[robot]));
+            let peers = kept.iter().filter(|&&(robot, _)| robot != slot).map(|(_, e)| **e).collect();
             view.observe_worker(own.as_ref(), team.as_ref());
-            heard.push(Heard { own, team, peers });
+            heard.push(Heard { own, team, peers, facing });
         }
         heard
     }
@@ -120,6 +122,7 @@ pub fn warm_up_seed(episode_seed: u64) -> u64 {
 mod tests {
     use super::*;
     use spwi_proto::Station;
+    use std::f32::consts::PI;
 
     #[test]
     fn a_robot_holds_the_track_of_the_peers_it_hears_and_nobody_elses() {
@@ -129,21 +132,33 @@ mod tests {
             (TeamFloor::new(camera.clone(), 4), TeamFloor::new(camera.clone(), 4), TeamFloor::new(camera, 4));
         let mut world = World::new(layout, Scenario::Dynamic, 9, 4);
         let ids: Vec<RobotId> = (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect();
-        let mut fused_peers = 0;
+        let (mut fused_peers, mut shared_facings) = (0, 0);
         for _ in 0..100 {
             world.step();
             let frames: Vec<DetectionFrame> = ids.iter().enumerate().map(|(s, id)| world.observe(s, id)).collect();
-            let (own, _) = all.observe(&frames);
+            let own: Vec<_> = all.observe(&frames).into_iter().map(|h| h.own).collect();
+            // A robot's facing counts for the team while its estimate does.
+            let facing = |slot: usize| {
+                own[slot].and_then(|_| crate::calibration::of(&world.layout.camera).facing_in(&frames[slot]))
+            };
             for (slot, h) in deaf.observe_heard(&frames, |_, _| false).into_iter().enumerate() {
                 assert_eq!((h.own, h.team, h.peers.len()), (own[slot], own[slot], 0), "alone: its own track");
+                let same = match (h.facing, facing(slot)) {
+                    (Some(a), Some(b)) => ((a - b + PI).rem_euclid(2.0 * PI) - PI).abs() < 1e-5,
+                    (a, b) => a == b,
+                };
+                assert!(same, "and its own facing: {:?} vs {:?}", h.facing, facing(slot));
             }
             // Robot 0 hears robot 1 only: its peers are robot 1's estimate, fused with its own.
             let h = half.observe_heard(&frames, |l, s| l != 0 || s == 1).remove(0);
             assert_eq!(h.peers, own[1].into_iter().collect::<Vec<_>>());
             assert_eq!(h.team, floor::fuse(own[0].iter().chain(&own[1])));
+            assert_eq!(h.facing, floor::fuse_facings([facing(0), facing(1)].into_iter().flatten()));
+            shared_facings += usize::from(facing(0).is_some() && facing(1).is_some());
             fused_peers += h.peers.len();
         }
         assert!(fused_peers > 20, "robot 1 should see the worker on some ticks: {fused_peers}");
+        assert!(shared_facings > 10, "both robots should see the body's facing on some ticks: {shared_facings}");
         let (own_maps, team_maps): (Vec<_>, Vec<_>) = deaf.maps().map(|(o, t)| (o.stations(), t.stations())).unzip();
         assert_eq!(own_maps, team_maps, "a robot that hears nobody maps only what it saw");
     }

@@ -107,6 +107,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             visibility: 1,
             votes: true,
             worker: None,
+            facing: None,
             landmarks: vec![],
         });
         let spoofed = encode(&VoteMsg { robot: id("mallory"), ..good_vote.clone() });

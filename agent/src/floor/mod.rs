@@ -20,7 +20,7 @@ pub mod stations;
 pub mod track;
 
 pub use calibration::CameraCalibration;
-pub use relations::{facing, peer_set, relations, FACING_DIM, RELATION_DIM};
+pub use relations::{facing, fuse_facings, peer_set, relations, FACING_DIM, RELATION_DIM};
 pub use stations::StationMap;
 pub use track::{agrees_with_most, fuse, Track};
 

@@ -93,6 +93,18 @@ pub fn facing(
     }
 }
 
+/// The team's facing from the facings its robots saw for one tick: their circular
+/// mean (radians, in (−π, π]). `None` without facings, or when they cancel out (two
+/// robots that saw the body face opposite ways tell nothing). Order does not matter.
+pub fn fuse_facings(facings: impl IntoIterator<Item = f32>) -> Option<f32> {
+    let (mut c, mut s) = (0.0f32, 0.0f32);
+    for f in facings {
+        c += f.cos();
+        s += f.sin();
+    }
+    (c.hypot(s) > 1e-3).then(|| s.atan2(c))
+}
+
 /// One relation block per peer estimate into `out` (`slots` × [`RELATION_DIM`],
 /// empty slots zero), against the same map. With more peers than slots, those whose
 /// position is known best are kept. The order of the blocks carries no meaning: the
@@ -158,6 +170,20 @@ mod tests {
         assert!(out.iter().zip(&moved).all(|(a, b)| (a - b).abs() < 1e-5), "{out:?} vs {moved:?}");
         facing(Some(&still), None, &stations, &mut out);
         assert!(out.iter().all(|&x| x == 0.0), "facing unknown: zeros");
+    }
+
+    #[test]
+    fn the_team_facing_is_the_circular_mean_of_its_robots() {
+        use std::f32::consts::PI;
+        assert_eq!(fuse_facings([]), None);
+        assert_eq!(fuse_facings([0.4]), Some(0.4));
+        assert!(fuse_facings([0.3, -0.1]).is_some_and(|f| (f - 0.1).abs() < 1e-6));
+        // Across the ±π seam: the mean is west, not east.
+        let west = fuse_facings([PI - 0.1, -PI + 0.1]).unwrap();
+        assert!((west.abs() - PI).abs() < 1e-5, "{west}");
+        let (a, b) = (fuse_facings([PI - 0.1, -PI + 0.1, 0.5]), fuse_facings([0.5, -PI + 0.1, PI - 0.1]));
+        assert!((a.unwrap() - b.unwrap()).abs() < 1e-6, "order: {a:?} {b:?}");
+        assert_eq!(fuse_facings([0.0, PI]), None, "opposite views tell nothing");
     }
 
     #[test]
