@@ -46,7 +46,7 @@
 
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
-use crate::floor::{self, CameraCalibration, FloorView, StationMap, RELATION_DIM};
+use crate::floor::{self, CameraCalibration, FloorView, Sighting, StationMap, RELATION_DIM};
 use crate::graph::GraphBuilder;
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
@@ -658,32 +658,31 @@ impl Engine {
         // the others contradict is left out of the team's track and counts against its
         // robot's trust; so do peers we have learned to doubt.
         let me = &self.cfg.robot;
-        let (robots, estimates): (Vec<&RobotId>, Vec<&WorkerEstimate>) =
-            own.worker.as_ref().map(|w| (me, w)).into_iter().chain(tick.workers.iter()).unzip();
-        let agrees = floor::agrees_with_most(&estimates);
+        let ours = own.worker.as_ref().map(|estimate| (me, Sighting { estimate, facing: own.facing }));
+        let theirs =
+            tick.workers.iter().map(|(r, estimate)| (r, Sighting { estimate, facing: tick.facings.get(r).copied() }));
+        let (robots, sightings): (Vec<&RobotId>, Vec<Sighting>) = ours.into_iter().chain(theirs).unzip();
         let trust = &self.trust;
-        let fused = |i: usize| agrees.as_ref().is_none_or(|a| a[i]) && (robots[i] == me || trust.fuses(robots[i]));
-        let team_worker = floor::fuse((0..estimates.len()).filter(|&i| fused(i)).map(|i| estimates[i]));
-        // The team's facing: that of the robots whose estimates make its track.
-        let facing_of = |i: usize| if robots[i] == me { own.facing } else { tick.facings.get(robots[i]).copied() };
-        let team_facing = floor::fuse_facings((0..estimates.len()).filter(|&i| fused(i)).filter_map(facing_of));
+        let team = floor::team_worker(&sightings, |i| robots[i] == me || trust.fuses(robots[i]));
         // A peer-set model also reads each fused peer's own estimate.
         let slots = self.inference.peer_slots();
-        let fused_peers: Vec<&WorkerEstimate> =
-            (0..estimates.len()).filter(|&i| slots > 0 && robots[i] != me && fused(i)).map(|i| estimates[i]).collect();
+        let fused_peers: Vec<&WorkerEstimate> = (0..sightings.len())
+            .filter(|&i| slots > 0 && robots[i] != me && team.kept[i])
+            .map(|i| sightings[i].estimate)
+            .collect();
         let peers_mean =
             temporal::mean(tick.embeddings.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, e)| e.as_deref()));
         // Judged after the fusion above, which used the trust earned before this tick;
         // the trust our vote carries below includes this judgement.
-        for (robot, ok) in robots.iter().zip(agrees.iter().flatten()) {
+        for (robot, ok) in robots.iter().zip(team.agrees.iter().flatten()) {
             self.trust.learn_track(robot, *ok);
         }
-        self.floor.observe_worker(own.worker.as_ref(), team_worker.as_ref());
+        self.floor.observe_worker(own.worker.as_ref(), team.track.as_ref());
         let will_vote = own.will_vote;
         // The ego model reads our own track, facing and map, the collective the team's.
         let (worker, facing, stations) = match self.cfg.temporal {
             TemporalModel::Ego => (own.worker.as_ref(), own.facing, self.floor.own_map.stations()),
-            TemporalModel::Collective => (team_worker.as_ref(), team_facing, self.floor.team_map.stations()),
+            TemporalModel::Collective => (team.track.as_ref(), team.facing, self.floor.team_map.stations()),
         };
         let (relations, facing) = self.row_layout.blocks(worker, facing, &stations);
         let peers = (slots > 0).then(|| {

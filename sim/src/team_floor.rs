@@ -10,7 +10,7 @@
 //! seconds on a new floor, which is a different question.
 
 use anyhow::Result;
-use spwi_agent::floor::{self, CameraCalibration, FloorView, StationMap};
+use spwi_agent::floor::{self, CameraCalibration, FloorView, Sighting, StationMap};
 use spwi_proto::{DetectionFrame, RobotId, WorkerEstimate};
 use spwi_world::layout::Layout;
 use spwi_world::world::{Scenario, World};
@@ -58,20 +58,18 @@ impl TeamFloor {
                 view.add_peer_landmarks(&shared[p].1);
             }
             let own = shared[slot].0;
-            // (robot, estimate): ours first, as the engine orders them.
-            let estimates: Vec<(usize, &WorkerEstimate)> = own
-                .iter()
-                .map(|e| (slot, e))
-                .chain(peers.iter().filter_map(|&p| shared[p].0.as_ref().map(|e| (p, e))))
+            // (robot, sighting): ours first, as the engine orders them.
+            let (robots, sightings): (Vec<usize>, Vec<Sighting>) = std::iter::once(slot)
+                .chain(peers)
+                .filter_map(|r| shared[r].0.as_ref().map(|estimate| (r, Sighting { estimate, facing: facings[r] })))
+                .unzip();
+            let team = floor::team_worker(&sightings, |_| true);
+            let peers = (0..sightings.len())
+                .filter(|&i| team.kept[i] && robots[i] != slot)
+                .map(|i| *sightings[i].estimate)
                 .collect();
-            let agrees = floor::agrees_with_most(&estimates.iter().map(|(_, e)| *e).collect::<Vec<_>>());
-            let kept: Vec<(usize, &WorkerEstimate)> =
-                (0..estimates.len()).filter(|&i| agrees.as_ref().is_none_or(|a| a[i])).map(|i| estimates[i]).collect();
-            let team = floor::fuse(kept.iter().map(|(_, e)| *e));
-            let facing = floor::fuse_facings(kept.iter().filter_map(|&(robot, _)| facings[robot]));
-            let peers = kept.iter().filter(|&&(robot, _)| robot != slot).map(|(_, e)| **e).collect();
-            view.observe_worker(own.as_ref(), team.as_ref());
-            heard.push(Heard { own, team, peers, facing });
+            view.observe_worker(own.as_ref(), team.track.as_ref());
+            heard.push(Heard { own, team: team.track, peers, facing: team.facing });
         }
         heard
     }

@@ -163,6 +163,44 @@ pub fn agrees_with_most(estimates: &[&WorkerEstimate]) -> Option<Vec<bool>> {
     })
 }
 
+/// What one robot holds of the worker for a tick: its estimate, and where its frame
+/// showed the body facing.
+#[derive(Debug, Clone, Copy)]
+pub struct Sighting<'a> {
+    pub estimate: &'a WorkerEstimate,
+    pub facing: Option<f32>,
+}
+
+/// The team's worker for one tick, from the robots' [`Sighting`]s.
+#[derive(Debug, Clone)]
+pub struct TeamWorker {
+    /// The fused track of the sightings kept.
+    pub track: Option<WorkerEstimate>,
+    /// The circular mean of their facings ([`super::fuse_facings`]).
+    pub facing: Option<f32>,
+    /// Per sighting: whether it is in the fusion.
+    pub kept: Vec<bool>,
+    /// Per sighting: whether it agrees with most ([`agrees_with_most`]).
+    pub agrees: Option<Vec<bool>>,
+}
+
+/// The one rule of who makes the team's view of the worker, for the engine and the
+/// training data alike: a sighting is kept when most others do not contradict its
+/// estimate and `trusted` says so; the kept ones' estimates make the track and their
+/// facings the facing.
+pub fn team_worker(sightings: &[Sighting], trusted: impl Fn(usize) -> bool) -> TeamWorker {
+    let estimates: Vec<&WorkerEstimate> = sightings.iter().map(|s| s.estimate).collect();
+    let agrees = agrees_with_most(&estimates);
+    let kept: Vec<bool> = (0..sightings.len()).map(|i| agrees.as_ref().is_none_or(|a| a[i]) && trusted(i)).collect();
+    let kept_sightings = || sightings.iter().zip(&kept).filter(|(_, &k)| k).map(|(s, _)| s);
+    TeamWorker {
+        track: fuse(kept_sightings().map(|s| s.estimate)),
+        facing: super::fuse_facings(kept_sightings().filter_map(|s| s.facing)),
+        kept,
+        agrees,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,6 +216,21 @@ mod tests {
         assert_eq!(agrees_with_most(&[&a, &far]), None, "two: no majority");
         assert_eq!(agrees_with_most(&[&a, &b, &far]), Some(vec![true, true, false]));
         assert_eq!(agrees_with_most(&[&far, &a, &c, &b]), Some(vec![false, true, true, true]));
+    }
+
+    #[test]
+    fn the_team_is_made_of_the_sightings_neither_contradicted_nor_distrusted() {
+        let at = |x: f32| WorkerEstimate { position: [x, 2.0], velocity: [0.0; 2], covariance: [0.04, 0.0, 1.0] };
+        let (a, b, c, far) = (at(5.0), at(5.3), at(5.1), at(9.0));
+        let seen = |estimate, facing| Sighting { estimate, facing: Some(facing) };
+        let sightings = [seen(&a, 0.1), seen(&b, 0.3), seen(&far, 3.0), seen(&c, 1.5)];
+        let team = team_worker(&sightings, |i| i != 3); // the fourth is distrusted
+        assert_eq!(team.agrees, Some(vec![true, true, false, true]));
+        assert_eq!(team.kept, vec![true, true, false, false]);
+        assert_eq!(team.track, fuse([&a, &b]));
+        assert!(team.facing.is_some_and(|f| (f - 0.2).abs() < 1e-6), "{:?}: a's and b's only", team.facing);
+        let unseen = team_worker(&[Sighting { estimate: &a, facing: None }], |_| true);
+        assert_eq!((unseen.track, unseen.facing, unseen.agrees), (Some(a), None, None), "alone: its own track");
     }
 
     /// A deterministic standard normal from a counter (Box–Muller over a hash).
