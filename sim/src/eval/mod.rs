@@ -610,6 +610,7 @@ mod tests {
             generalisation: vec![cold],
             designs: Vec::new(),
             warm_maps: vec![warm],
+            fresh: Vec::new(),
         };
         let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
         let rows: Vec<&str> = page.lines().filter(|l| l.starts_with("| test | 3 |")).collect();
@@ -626,6 +627,32 @@ mod tests {
             let row = format!("| collective − CVM at t | ≥ +10 pts | fixed | {maps} |");
             assert!(page.contains(&row), "no row {row:?} in\n{page}");
         }
+        assert!(!page.contains("A fresh sample"), "no fresh sample run, no section");
+
+        // Where the fresh sample ran, its run follows its twin and every target read
+        // off the held-out floors alone is read off it too.
+        let mut fresh = st.generalisation[0].clone();
+        fresh.floors = studies::with_cameras(studies::FRESH_FLOORS, CameraPolicy::Fixed);
+        fresh.seed += studies::FRESH_SEED_OFFSET;
+        fresh.models.get_mut("collective").unwrap().t = fresh.models["cvm"].t + 0.123;
+        st.fresh.push(fresh);
+        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        let seeds = [" | 5 | ".to_owned(), format!(" | {} | ", 5 + studies::FRESH_SEED_OFFSET)];
+        let section: Vec<&str> =
+            page.lines().filter(|l| l.starts_with("| heldout:") && seeds.iter().any(|s| l.contains(s))).collect();
+        assert_eq!(section.len(), 2, "{page}");
+        assert!(
+            section[0].starts_with("| heldout:0..50") && section[1].starts_with("| heldout:50..100"),
+            "{section:?}"
+        );
+        assert!(section[1].contains(&format!("| {} | empty |", 5 + studies::FRESH_SEED_OFFSET)), "{section:?}");
+        let reading =
+            page.lines().find(|l| l.starts_with("| collective − CVM at t | ≥ +10 pts | fixed | empty |")).unwrap();
+        assert!(reading.ends_with("| +12.3, met |"), "{reading}");
+        let warm_reading =
+            page.lines().find(|l| l.starts_with("| collective − CVM at t | ≥ +10 pts | fixed | warm")).unwrap();
+        assert!(warm_reading.ends_with("| – |"), "no fresh run with warm maps: {warm_reading}");
+        st.fresh.clear();
 
         // A floor is read against the held-out floors under its own cameras only.
         let (heldout, moved) = (st.generalisation[0].clone(), st.generalisation[0].clone());
@@ -641,7 +668,7 @@ mod tests {
         let moved: Vec<&str> = page.lines().filter(|l| l.starts_with("| collective at t on factory-moved")).collect();
         assert_eq!(moved.len(), 1, "{page}");
         assert!(
-            moved[0].contains("| track | empty | 4.0 (collective 81.0") && moved[0].ends_with("| met |"),
+            moved[0].contains("| track | empty | 4.0 (collective 81.0") && moved[0].ends_with("| met | – |"),
             "{moved:?}"
         );
     }
