@@ -319,6 +319,15 @@ fn points(r: &Report, model: &str, other: &str) -> String {
     lead(r, model, other).map_or("–".into(), |g| format!("{:+.1}", 100.0 * g))
 }
 
+/// "empty" or "warm, 60 s": how a run's station maps started.
+fn maps(r: &Report) -> String {
+    if r.warm_map_s > 0.0 {
+        format!("warm, {} s", r.warm_map_s)
+    } else {
+        "empty".into()
+    }
+}
+
 fn pct(v: f64) -> String {
     format!("{:.1}", 100.0 * v)
 }
@@ -635,7 +644,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                     && r.warm_map_s == 0.0
             });
             for r in cold.into_iter().chain([warm]) {
-                let maps = if r.warm_map_s > 0.0 { format!("warm, {} s", r.warm_map_s) } else { "empty".into() };
+                let maps = maps(r);
                 let _ = writeln!(
                     w,
                     "| {} | {} | {maps} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
@@ -697,7 +706,7 @@ fn fresh_sample(st: &Studies, seed: u64, w: &mut String) {
                 && r.warm_map_s == f.warm_map_s
         });
         for r in twin.into_iter().chain([f]) {
-            let maps = if r.warm_map_s > 0.0 { format!("warm, {} s", r.warm_map_s) } else { "empty".into() };
+            let maps = maps(r);
             let _ = writeln!(
                 w,
                 "| {} | {} | {maps} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
@@ -773,7 +782,7 @@ fn target_rows<'a>(st: &'a Studies, ours: &str, warm: bool, cameras: CameraPolic
     let Some(heldout) = find(&all, HELDOUT_FLOORS, 3) else { return };
     let fresh = find(&fresh, FRESH_FLOORS, 3);
     let (Some(collective), Some(cvm)) = (at(heldout, "collective"), at(heldout, "cvm")) else { return };
-    let maps = if warm { format!("warm, {} s", heldout.warm_map_s) } else { "empty".to_owned() };
+    let maps = maps(heldout);
     // The cameras and maps columns of every row.
     let setting = format!("{} | {maps}", format!("{cameras:?}").to_lowercase());
     // A measure on the fresh sample: "+4.1, missed by 5.9 pts", or "–" where not run.
