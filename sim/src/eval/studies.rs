@@ -769,7 +769,7 @@ fn lead(r: &Report, model: &str, other: &str) -> Option<f64> {
 /// The rows of [`targets`] whose runs exist, with maps empty or `warm`, under `cameras`.
 fn target_rows<'a>(st: &'a Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &mut String) {
     let all: Vec<&Report> = st.designs.iter().chain(&st.generalisation).chain(&st.warm_maps).collect();
-    let fresh: Vec<&Report> = st.fresh.iter().collect();
+    let fresh_runs: Vec<&Report> = st.fresh.iter().collect();
     let find = |runs: &[&'a Report], floors: &str, robots: usize| {
         runs.iter().copied().find(|r| {
             r.model_set == ours
@@ -780,7 +780,7 @@ fn target_rows<'a>(st: &'a Studies, ours: &str, warm: bool, cameras: CameraPolic
         })
     };
     let Some(heldout) = find(&all, HELDOUT_FLOORS, 3) else { return };
-    let fresh = find(&fresh, FRESH_FLOORS, 3);
+    let fresh = find(&fresh_runs, FRESH_FLOORS, 3);
     let (Some(collective), Some(cvm)) = (at(heldout, "collective"), at(heldout, "cvm")) else { return };
     let maps = maps(heldout);
     // The cameras and maps columns of every row.
