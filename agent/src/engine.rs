@@ -666,10 +666,7 @@ impl Engine {
         let team = floor::team_worker(&sightings, |i| robots[i] == me || trust.fuses(robots[i]));
         // A peer-set model also reads each fused peer's own estimate.
         let slots = self.inference.peer_slots();
-        let fused_peers: Vec<&WorkerEstimate> = (0..sightings.len())
-            .filter(|&i| slots > 0 && robots[i] != me && team.kept[i])
-            .map(|i| sightings[i].estimate)
-            .collect();
+        let fused_peers = if slots > 0 { team.kept_peers(&sightings, |i| robots[i] == me) } else { Vec::new() };
         let peers_mean =
             temporal::mean(tick.embeddings.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, e)| e.as_deref()));
         // Judged after the fusion above, which used the trust earned before this tick;

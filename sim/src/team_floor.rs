@@ -64,10 +64,7 @@ impl TeamFloor {
                 .filter_map(|r| shared[r].0.as_ref().map(|estimate| (r, Sighting { estimate, facing: facings[r] })))
                 .unzip();
             let team = floor::team_worker(&sightings, |_| true);
-            let peers = (0..sightings.len())
-                .filter(|&i| team.kept[i] && robots[i] != slot)
-                .map(|i| *sightings[i].estimate)
-                .collect();
+            let peers = team.kept_peers(&sightings, |i| robots[i] == slot).into_iter().copied().collect();
             view.observe_worker(own.as_ref(), team.track.as_ref());
             heard.push(Heard { own, team: team.track, peers, facing: team.facing });
         }

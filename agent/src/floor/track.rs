@@ -201,6 +201,14 @@ pub fn team_worker(sightings: &[Sighting], trusted: impl Fn(usize) -> bool) -> T
     }
 }
 
+impl TeamWorker {
+    /// The estimates of the kept `sightings` (those this was made from) that `mine`
+    /// does not claim: the peers' views in the team's track.
+    pub fn kept_peers<'a>(&self, sightings: &[Sighting<'a>], mine: impl Fn(usize) -> bool) -> Vec<&'a WorkerEstimate> {
+        sightings.iter().enumerate().filter(|&(i, _)| self.kept[i] && !mine(i)).map(|(_, s)| s.estimate).collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -228,6 +236,7 @@ mod tests {
         assert_eq!(team.agrees, Some(vec![true, true, false, true]));
         assert_eq!(team.kept, vec![true, true, false, false]);
         assert_eq!(team.track, fuse([&a, &b]));
+        assert_eq!(team.kept_peers(&sightings, |i| i == 0), vec![&b], "kept, not ours");
         assert!(team.facing.is_some_and(|f| (f - 0.2).abs() < 1e-6), "{:?}: a's and b's only", team.facing);
         let unseen = team_worker(&[Sighting { estimate: &a, facing: None }], |_| true);
         assert_eq!((unseen.track, unseen.facing, unseen.agrees), (Some(a), None, None), "alone: its own track");

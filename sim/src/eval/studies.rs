@@ -254,12 +254,12 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         (with_cameras(name, policy), floors)
     };
     let on_heldout = |policy: CameraPolicy| under((HELDOUT_FLOORS, &heldout), policy);
-    let scenario_3_seeded = |models: &std::sync::Arc<ModelSet>,
-                             (name, floors): (String, Vec<NamedLayout>),
-                             robots: usize,
-                             warm_s: u32,
-                             cnn1d: bool,
-                             seed: u64| {
+    let scenario_3 = |models: &std::sync::Arc<ModelSet>,
+                      (name, floors): (String, Vec<NamedLayout>),
+                      robots: usize,
+                      warm_s: u32,
+                      cnn1d: bool,
+                      seed: u64| {
         let r = run(&EvalOptions {
             scenario: Scenario::Dynamic,
             robots,
@@ -277,38 +277,32 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         super::print(&r);
         anyhow::Ok(r)
     };
-    let scenario_3 =
-        |models: &std::sync::Arc<ModelSet>,
-         floors: (String, Vec<NamedLayout>),
-         robots: usize,
-         warm_s: u32,
-         cnn1d: bool| scenario_3_seeded(models, floors, robots, warm_s, cnn1d, s.seed);
     let mut unseen = unseen_floors(&s.floors_name, s.camera)?;
     for floors in &unseen {
-        st.generalisation.push(scenario_3(&default, floors.clone(), 3, 0, true)?);
+        st.generalisation.push(scenario_3(&default, floors.clone(), 3, 0, true, s.seed)?);
     }
     // The built-in floors again under tracking cameras, to set beside the held-out
     // floors under the same cameras (the design study's run).
     if s.camera != Some(CameraPolicy::Track) {
         let tracked = unseen_floors(&s.floors_name, Some(CameraPolicy::Track))?;
         for floors in tracked.into_iter().filter(|(name, _)| !name.starts_with(HELDOUT_FLOORS)) {
-            st.generalisation.push(scenario_3(&default, floors.clone(), 3, 0, false)?);
+            st.generalisation.push(scenario_3(&default, floors.clone(), 3, 0, false, s.seed)?);
             unseen.push(floors);
         }
     }
     for (models, policy, robots) in configs {
-        st.designs.push(scenario_3(models, on_heldout(policy), robots, 0, false)?);
+        st.designs.push(scenario_3(models, on_heldout(policy), robots, 0, false, s.seed)?);
     }
     let mut warm: Vec<((String, Vec<NamedLayout>), usize)> = vec![(on_heldout(CameraPolicy::Fixed), 3)];
     warm.extend([1, 2, 3, 4].map(|n| (on_heldout(CameraPolicy::Track), n)));
     warm.extend(unseen.into_iter().filter(|(name, _)| !name.starts_with(HELDOUT_FLOORS)).map(|f| (f, 3)));
     for (floors, robots) in warm {
-        st.warm_maps.push(scenario_3(&default, floors, robots, WARM_MAP_S, false)?);
+        st.warm_maps.push(scenario_3(&default, floors, robots, WARM_MAP_S, false, s.seed)?);
     }
     for policy in [CameraPolicy::Fixed, CameraPolicy::Track] {
         for warm_s in [0, WARM_MAP_S] {
             let floors = under((FRESH_FLOORS, &fresh), policy);
-            st.fresh.push(scenario_3_seeded(&default, floors, 3, warm_s, false, s.seed + FRESH_SEED_OFFSET)?);
+            st.fresh.push(scenario_3(&default, floors, 3, warm_s, false, s.seed + FRESH_SEED_OFFSET)?);
         }
     }
     Ok(st)
@@ -637,13 +631,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         );
         let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for warm in &st.warm_maps {
-            let cold = st.designs.iter().chain(&st.generalisation).find(|r| {
-                r.floors == warm.floors
-                    && r.robots == warm.robots
-                    && r.model_set == warm.model_set
-                    && r.warm_map_s == 0.0
-            });
-            for r in cold.into_iter().chain([warm]) {
+            for r in twin(st, &warm.floors, warm, 0.0).into_iter().chain([warm]) {
                 let maps = maps(r);
                 let _ = writeln!(
                     w,
@@ -678,6 +666,14 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
     m
 }
 
+/// The run of `r`'s set and fleet on `floors` whose maps were warmed for `warm_map_s`:
+/// the run a table sets `r` beside.
+fn twin<'a>(st: &'a Studies, floors: &str, r: &Report, warm_map_s: f64) -> Option<&'a Report> {
+    st.designs.iter().chain(&st.generalisation).chain(&st.warm_maps).find(|t| {
+        t.floors == floors && t.robots == r.robots && t.model_set == r.model_set && t.warm_map_s == warm_map_s
+    })
+}
+
 /// The fresh sample beside its twins on the held-out floors (same cameras and maps).
 fn fresh_sample(st: &Studies, seed: u64, w: &mut String) {
     if st.fresh.is_empty() {
@@ -699,12 +695,7 @@ fn fresh_sample(st: &Studies, seed: u64, w: &mut String) {
     let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|");
     for f in &st.fresh {
         let Some(cameras) = f.cameras else { continue };
-        let twin = st.designs.iter().chain(&st.generalisation).chain(&st.warm_maps).find(|r| {
-            r.floors == with_cameras(HELDOUT_FLOORS, cameras)
-                && r.robots == f.robots
-                && r.model_set == f.model_set
-                && r.warm_map_s == f.warm_map_s
-        });
+        let twin = twin(st, &with_cameras(HELDOUT_FLOORS, cameras), f, f.warm_map_s);
         for r in twin.into_iter().chain([f]) {
             let maps = maps(r);
             let _ = writeln!(
