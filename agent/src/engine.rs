@@ -516,7 +516,7 @@ impl Engine {
             self.metrics.stale_peer_messages += 1;
         } else if from_peer {
             // Where a peer saw station objects stays true after its tick.
-            self.floor.add_peer_landmarks(&e.landmarks);
+            self.floor.add_peer_landmarks(&e.landmarks, e.tick);
         }
         if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
             // A stale peer is heard as one that does not see the worker and abstains.
@@ -1119,7 +1119,7 @@ pub(crate) mod tests {
         let sighting = |station, x: f32| Landmark { station, position: [x, 9.0], sigma: 0.3 };
         for l in [sighting(Station::Manufacturing, 9.0), sighting(Station::Storage, 2.0)] {
             for _ in 0..3 {
-                a.floor.team_map.add(&l);
+                a.floor.team_map.add(&l, 0);
             }
         }
         b.floor.team_map.borrow(&[None, None, None, Some([50.0, 50.0])]); // heard from another

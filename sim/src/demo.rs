@@ -341,7 +341,7 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
                     Topic::Embedding => {
                         if let Ok(e) = decode_from::<EmbeddingMsg>(&bytes, &robot) {
                             for l in &e.landmarks {
-                                o.station_map.add(l);
+                                o.station_map.add(l, e.tick);
                             }
                             if let Some(w) = e.worker {
                                 o.estimates.insert(robot, (e.tick, w));

@@ -55,7 +55,7 @@ impl TeamFloor {
         for (slot, view) in self.views.iter_mut().enumerate() {
             let peers: Vec<usize> = (0..shared.len()).filter(|&p| p != slot && hears(slot, p)).collect();
             for &p in &peers {
-                view.add_peer_landmarks(&shared[p].1);
+                view.add_peer_landmarks(&shared[p].1, frames[p].tick);
             }
             let own = shared[slot].0;
             // (robot, sighting): ours first, as the engine orders them.

@@ -56,8 +56,8 @@ impl FloorView {
         }
         let landmarks = self.camera.landmarks(&pose, &frame.objects);
         for l in &landmarks {
-            self.own_map.add(l);
-            self.team_map.add(l);
+            self.own_map.add(l, frame.tick);
+            self.team_map.add(l, frame.tick);
         }
         (self.track.estimate(frame.tick), landmarks)
     }
@@ -74,10 +74,10 @@ impl FloorView {
         self.team_map.observe_worker(team);
     }
 
-    /// A peer's landmarks of a tick, into the team map.
-    pub fn add_peer_landmarks(&mut self, landmarks: &[Landmark]) {
+    /// A peer's landmarks of `tick`, into the team map.
+    pub fn add_peer_landmarks(&mut self, landmarks: &[Landmark], tick: u64) {
         for l in landmarks {
-            self.team_map.add(l);
+            self.team_map.add(l, tick);
         }
     }
 }
