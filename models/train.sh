@@ -1,10 +1,14 @@
 #!/usr/bin/env bash
 # From the simulated factory to the shipped ONNX model sets, with no manual step:
 #
-#   1. spwi-sim dataset (scenarios 1-3): the spatial graphs;
-#   2. train_gcn.py: the GCN, exported to ONNX;
+#   1. spwi-sim dataset (scenarios 1-3): the spatial graphs, as the paper builds them
+#      (image distances, appearance) and as our sets do (floor distances, each node's
+#      floor relations: --node-features floor_relations, agent/src/graph.rs);
+#   2. train_gcn.py: a GCN on each, exported to ONNX (`paper` ships the first, every
+#      other set the second);
 #   3. spwi-sim dataset --gcn gcn.onnx: the temporal rows, with the embeddings the
-#      agent's own Rust code computes from that exported GCN;
+#      agent's own Rust code computes from the paper's exported GCN (only `paper`'s
+#      rows read them);
 #   4. train_temporal.py per model set: ego-GRU, collective-GRU (and the 1D-CNN baseline
 #      for the default set), temperature scaling, export, checks, manifest. `paper` is
 #      the paper's design (rows: embeddings and keypoints); `relations` adds the
@@ -21,9 +25,11 @@
 # track the worker, and whose fleet starts from the maps of up to WARM_UP_MAX s of work
 # on the floor: sim/src/training_mix.rs), SPWI_TRAIN_VENV,
 # SPWI_TRAIN_DATA (where the exports go, ~5 GB), MODELS_OUT (where the sets go:
-# models/), STAGE2_ONLY=1 (reuse the GCN and temporal exports already in
-# SPWI_TRAIN_DATA), GCN_FROM=models/SET (skip stage 1: take that shipped set's GCN,
-# which was trained on the same data), CARGO_TARGET_DIR.
+# models/), STAGE2_ONLY=1 (reuse the GCNs and temporal exports already in
+# SPWI_TRAIN_DATA), GCN_FROM="models/SET ..." (take each named shipped set's GCN, which
+# was trained on the same data, for the graphs it reads — its manifest's node_features
+# — instead of training one; e.g. GCN_FROM="models/paper models/default" trains none),
+# CARGO_TARGET_DIR.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -71,26 +77,36 @@ export_all() { # $1: part name, $2: robots, then extra dataset flags
 
 case "$LAYOUTS" in *heldout:*) echo "LAYOUTS=$LAYOUTS: the held-out floors are the evaluation's, never trained on" >&2; exit 2 ;; esac
 
+# The GCN of each kind of graph: the paper's in gcn/, ours in gcn-floor/.
+gcn_dir() { case "$1" in appearance) echo "$DATA/gcn" ;; floor_relations) echo "$DATA/gcn-floor" ;; esac; }
+needs_floor=""
+for set in $SETS; do [ "$set" = paper ] || needs_floor=1; done
+
 if [ -z "${STAGE2_ONLY:-}" ]; then
   rm -rf "$DATA"; mkdir -p "$DATA"
-  if [ -n "${GCN_FROM:-}" ]; then
-    step "stage 1: the GCN of $GCN_FROM"
-    mkdir -p "$DATA/gcn"
-    cp "$GCN_FROM/gcn.onnx" "$DATA/gcn/"
-    "$PY" - "$GCN_FROM" "$DATA/gcn" <<'PY'
+  for from in ${GCN_FROM:-}; do
+    kind=$("$PY" -c 'import json,sys; print(json.load(open(sys.argv[1]+"/manifest.json")).get("node_features","appearance"))' "$from")
+    step "stage 1: the GCN of $from ($kind graphs)"
+    mkdir -p "$(gcn_dir "$kind")"
+    cp "$from/gcn.onnx" "$(gcn_dir "$kind")/"
+    "$PY" - "$from" "$(gcn_dir "$kind")" <<'PY'
 import json, sys
 src, out = sys.argv[1:]
+m = json.load(open(f"{src}/manifest.json"))
 json.dump(json.load(open(f"{src}/reference.json"))["gcn"], open(f"{out}/gcn_reference.json", "w"))
-json.dump({**json.load(open(f"{src}/manifest.json"))["training"]["gcn"], "from": src}, open(f"{out}/gcn.json", "w"))
+graph = {"max_nodes": m["max_nodes"], "edge_weight": m["edge_weight"], "node_features": m.get("node_features", "appearance")}
+json.dump({**m["training"]["gcn"], **graph, "from": src}, open(f"{out}/gcn.json", "w"))
 PY
-  else
-    step "stage 1 data: spatial graphs, $EPISODES episodes x 3 scenarios x 4 robots"
-    export_all spatial 4 --spatial-every 5
+  done
+  for kind in appearance ${needs_floor:+floor_relations}; do
+    [ ! -f "$(gcn_dir "$kind")/gcn.onnx" ] || continue
+    step "stage 1 data: spatial graphs ($kind), $EPISODES episodes x 3 scenarios x 4 robots"
+    export_all "spatial-$kind" 4 --spatial-every 5 --node-features "$kind"
 
-    step "stage 1: GCN"
-    (cd models/train && "$PY" train_gcn.py --data "$DATA"/spatial-s{1,2,3} --out "$DATA/gcn" --seed "$SEED")
-    rm -rf "$DATA"/spatial-s*  # the graphs are not needed again
-  fi
+    step "stage 1: GCN ($kind graphs)"
+    (cd models/train && "$PY" train_gcn.py --data "$DATA/spatial-$kind"-s{1,2,3} --out "$(gcn_dir "$kind")" --seed "$SEED")
+    rm -rf "$DATA/spatial-$kind"-s*  # the graphs are not needed again
+  done
 
   step "stage 2 data: temporal rows through the exported GCN (agent's Rust code)"
   export_all temporal 4 --gcn "$DATA/gcn/gcn.onnx" --human-features --spatial-every 1000000
@@ -115,7 +131,8 @@ for set in $SETS; do
     *) echo "unknown model set $set" >&2; exit 2 ;;
   esac
   data=temporal; [ "$set" != peer-set ] || data=temporal8
-  (cd models/train && "$PY" train_temporal.py --data "$DATA/$data"-s{1,2,3} --gcn-dir "$DATA/gcn" \
+  gcn="$(gcn_dir floor_relations)"; [ "$set" != paper ] || gcn="$(gcn_dir appearance)"
+  (cd models/train && "$PY" train_temporal.py --data "$DATA/$data"-s{1,2,3} --gcn-dir "$gcn" \
     --out "$OUT/$set" --seed "$SEED" "${args[@]}")
   # The study sets' GCN fixes its node count (the daemon pads their graphs): a model
   # from elsewhere may, and the golden tests then cover both ways.

@@ -60,16 +60,17 @@ fn bench_backend(backend: Backend) {
     let m = &set.manifest;
     println!("\n== {backend:?} (model set {:?}, W = {}, H = {}, {} nodes)", m.name, m.window, m.horizon, m.max_nodes);
     let f = frame(1, 12);
-    let mut graph = GraphBuilder::new(m.max_nodes, m.edge_weight);
-    measure("star graph (12 objects)", 20_000, || {
-        black_box(graph.build(black_box(&f)));
+    let mut graph = GraphBuilder::new(m.max_nodes, m.edge_weight, m.node_features);
+    let camera = spwi_agent::floor::CameraCalibration::default();
+    measure(&format!("star graph (12 objects, {:?})", m.node_features), 20_000, || {
+        black_box(graph.build(black_box(&f), Some(synthetic::on_floor(&camera))));
     });
     let mut ego = set.inference(TemporalModel::Ego).unwrap();
     let mut col = set.inference(TemporalModel::Collective).unwrap();
     // The simulated floors show one to three objects beside the worker; 12 is a crowded
     // view. A GCN that names its node count is fed only the real nodes (m.gcn_nodes()).
     for objects in [3, 12] {
-        let g = graph.build(&frame(1, objects)).unwrap().clone();
+        let g = graph.build(&frame(1, objects), Some(synthetic::on_floor(&camera))).unwrap().clone();
         measure(&format!("GCN ({objects} objects, {:?})", m.gcn_nodes()), 3_000, || {
             black_box(ego.gcn(black_box(&g)).unwrap());
         });

@@ -47,7 +47,7 @@
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
 use crate::floor::{self, CameraCalibration, FloorView, Sighting, StationMap, RELATION_DIM};
-use crate::graph::GraphBuilder;
+use crate::graph::{GraphBuilder, OnFloor};
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
 use crate::stale::Repeats;
@@ -279,7 +279,7 @@ impl Engine {
 
     pub fn new(cfg: EngineConfig, inference: Inference) -> Self {
         let m = &inference.set().manifest;
-        let graph = GraphBuilder::new(m.max_nodes, m.edge_weight);
+        let graph = GraphBuilder::new(m.max_nodes, m.edge_weight, m.node_features);
         let window = Window::with_frames(m.window, m.frames(), m.row).with_peer_slots(inference.peer_slots());
         let row_layout = m.row;
         let temperature = inference.set().temperature(cfg.temporal);
@@ -449,8 +449,11 @@ impl Engine {
             f.human = None;
             f.objects.clear();
         }
+        // The track first: a graph of floor relations places the objects against it.
+        let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
+        let on_floor = worker.as_ref().map(|worker| OnFloor { camera: self.floor.camera(), worker });
         let t0 = Instant::now();
-        let embedding = match self.graph.build(&f) {
+        let embedding = match self.graph.build(&f, on_floor) {
             None => None,
             Some(g) => {
                 self.metrics.frames_with_worker += 1;
@@ -474,7 +477,6 @@ impl Engine {
         let keypoints = f.human.as_ref().map(|h| temporal::normalise_keypoints(&h.keypoints, f.image_size));
         let visibility = f.visibility();
         let quality = vote::view_quality(&f);
-        let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
         // Shared whatever our set reads: a peer's set may read the team's facing.
         let facing = self.floor.camera().facing_in(&f);
         // A set that reads relations votes from the worker's track while it is fresh:

@@ -9,7 +9,7 @@
 //! at the first tick.
 
 use crate::floor::RELATION_DIM;
-use crate::graph::{EdgeWeight, NODE_FEATURE_DIM};
+use crate::graph::{EdgeWeight, NodeFeatures};
 use crate::temporal::{RowLayout, TemporalModel, CNN1D_DIM};
 use serde::{Deserialize, Serialize};
 use spwi_proto::{EMBEDDING_DIM, NUM_CLASSES};
@@ -81,10 +81,10 @@ pub struct ModelSpec {
 
 impl ModelSpec {
     /// The GCN interface the daemon feeds for graphs of `nodes` nodes (a size, or the
-    /// name of a node count left to each run).
-    pub fn gcn(nodes: Dim) -> ModelSpec {
+    /// name of a node count left to each run) whose nodes carry `features`.
+    pub fn gcn(nodes: Dim, features: NodeFeatures) -> ModelSpec {
         let t = |name: &str, shape: Vec<Dim>| TensorSpec { name: name.into(), shape };
-        let (f, n) = (Dim::Fixed(NODE_FEATURE_DIM), nodes);
+        let (f, n) = (Dim::Fixed(features.dim()), nodes);
         ModelSpec {
             file: "gcn.onnx".into(),
             inputs: vec![t("x", vec![Dim::Fixed(1), n.clone(), f]), t("adj", vec![Dim::Fixed(1), n.clone(), n])],
@@ -182,6 +182,11 @@ pub struct Manifest {
     pub frames: Option<usize>,
     pub horizon: usize,
     pub edge_weight: EdgeWeight,
+    /// What the GCN's graph is made of: image distances and appearance (absent, the
+    /// paper's), or floor distances and each node's floor relations
+    /// (`floor_relations`; `graph.rs`).
+    #[serde(default, skip_serializing_if = "is_appearance")]
+    pub node_features: NodeFeatures,
     /// What the temporal rows hold: the paper's parts only (absent), or the worker's
     /// relations to the mapped stations (`relations`), also where it faces
     /// (`relations_facing`).
@@ -198,6 +203,10 @@ pub struct Manifest {
     /// Everything else (dataset, evaluation figures, code version) is kept as is.
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+fn is_appearance(f: &NodeFeatures) -> bool {
+    *f == NodeFeatures::Appearance
 }
 
 fn is_paper(r: &RowLayout) -> bool {
@@ -299,10 +308,11 @@ impl Manifest {
             let same = |a: &[TensorSpec], b: &[TensorSpec]| a.iter().map(|t| &t.shape).eq(b.iter().map(|t| &t.shape));
             if !same(&spec.inputs, &want.inputs) || !same(&spec.outputs, &want.outputs) {
                 return bad(format!(
-                    "{what} ({}) declares inputs {} and outputs {}; with max_nodes {n}, window {} ({w} frames), horizon {} and {:?} rows the daemon feeds {} and reads {}",
+                    "{what} ({}) declares inputs {} and outputs {}; with max_nodes {n}, {:?} node features, window {} ({w} frames), horizon {} and {:?} rows the daemon feeds {} and reads {}",
                     spec.file,
                     shapes(&spec.inputs),
                     shapes(&spec.outputs),
+                    self.node_features,
                     self.window,
                     self.horizon,
                     self.row,
@@ -321,7 +331,7 @@ impl Manifest {
             outputs: vec![TensorSpec { name: "logits".into(), shape: Dim::fixed(&[1, steps, NUM_CLASSES]) }],
             temperature: None,
         };
-        expect(&self.models.gcn, ModelKind::Gcn, &ModelSpec::gcn(self.gcn_node_dim()))?;
+        expect(&self.models.gcn, ModelKind::Gcn, &ModelSpec::gcn(self.gcn_node_dim(), self.node_features))?;
         for temporal in [TemporalModel::Ego, TemporalModel::Collective] {
             let kind = ModelKind::gru(temporal);
             let spec = self.models.get(kind).expect("every set has both GRUs");

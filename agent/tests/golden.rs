@@ -249,6 +249,24 @@ fn a_set_whose_rows_the_daemon_cannot_build_is_refused_naming_the_tensor() {
 }
 
 #[test]
+fn a_set_whose_graphs_the_daemon_cannot_build_is_refused_naming_the_tensor() {
+    // The fixture's GCN reads appearance only (1024 values a node); a manifest claiming
+    // floor relations must not load (the daemon would feed 1033).
+    let dir = fixture_copy("graphs");
+    let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    m["node_features"] = "floor_relations".into();
+    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("gcn") && e.contains("FloorRelations") && e.contains("1033]") && e.contains("1024]"), "{e}");
+    m["node_features"] = "x-ray".into();
+    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    let e = format!("{:#}", ModelSet::load(&dir, Backend::Tract, None).unwrap_err());
+    assert!(e.contains("manifest.json") && e.contains("x-ray"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn the_daemons_gcn_gives_the_padded_graphs_outputs_from_its_real_nodes_alone() {
     use spwi_agent::graph::GraphBuilder;
     use spwi_agent::temporal::TemporalModel;
@@ -259,9 +277,10 @@ fn the_daemons_gcn_gives_the_padded_graphs_outputs_from_its_real_nodes_alone() {
         assert_eq!(m.gcn_nodes(), GcnNodes::Real, "{}", dir.display());
         let mut inference = set.inference(TemporalModel::Ego).unwrap();
         let mut padded = set.runner(ModelKind::Gcn).unwrap();
-        let mut builder = GraphBuilder::new(m.max_nodes, m.edge_weight);
+        let mut builder = GraphBuilder::new(m.max_nodes, m.edge_weight, m.node_features);
+        let camera = spwi_agent::floor::CameraCalibration::default();
         for objects in [0, 3, m.max_nodes - 1] {
-            let g = builder.build(&synthetic::frame(1, objects)).unwrap().clone();
+            let g = builder.build(&synthetic::frame(1, objects), Some(synthetic::on_floor(&camera))).unwrap().clone();
             let (n, f) = (m.max_nodes, g.x.len() / m.max_nodes);
             let want = padded
                 .run(&[Input { shape: &[1, n, f], data: &g.x }, Input { shape: &[1, n, n], data: &g.adj }])

@@ -1,7 +1,8 @@
 """The networks, with exactly the ONNX interface the daemon's manifest check expects.
 
 - GCN (paper II-C): two graph convolutions over the normalised adjacency,
-  1024 -> hidden -> 128, the worker (node 0) embedding, and a linear head to 4 logits.
+  features -> hidden -> 128, the worker (node 0) embedding, and a linear head to 4
+  logits; features is 1024 (appearance) or 1033 (appearance ‖ floor relations).
 - TemporalGRU (paper II-D): one GRU over [frames, D] rows (D = 162 ego, 290 collective),
   final hidden state -> logits for t and each of the next H ticks.
 - Cnn1dGRU (the paper's 1D-CNN baseline): five 1-D convolutions over the worker node's
@@ -23,9 +24,9 @@ from data import CLASSES, EMBEDDING, FACING, FEATURE, KEYPOINTS, PER_STATION, RE
 
 
 class GCN(nn.Module):
-    def __init__(self, hidden=256, dropout=0.2):
+    def __init__(self, features=FEATURE, hidden=256, dropout=0.2):
         super().__init__()
-        self.l1 = nn.Linear(FEATURE, hidden)
+        self.l1 = nn.Linear(features, hidden)
         self.l2 = nn.Linear(hidden, EMBEDDING)
         self.head = nn.Linear(EMBEDDING, CLASSES)
         self.drop = nn.Dropout(dropout)

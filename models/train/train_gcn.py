@@ -2,8 +2,10 @@
 """Stage 1: trains the GCN on the spatial part of one or more exports and exports it.
 
 Usage: train_gcn.py --data DIR [DIR ...] --out DIR [--epochs 12] [--seed 1]
-Writes OUT/gcn.onnx, OUT/gcn_reference.json and OUT/gcn.json (settings, test accuracy
-per scenario, time). The temporal datasets are then exported by running this gcn.onnx
+Writes OUT/gcn.onnx, OUT/gcn_reference.json and OUT/gcn.json (the graphs it reads —
+max_nodes, edge_weight, node_features, as the exports describe them — settings, test
+accuracy per scenario, time). The graph's node features are the exports' (`spwi-sim
+dataset --node-features`): appearance (the paper's) or appearance and floor relations. The temporal datasets are then exported by running this gcn.onnx
 through the agent's own Rust code (`spwi-sim dataset --gcn OUT/gcn.onnx`).
 """
 import argparse
@@ -20,14 +22,24 @@ from export import export
 from nets import GCN
 
 
+def graph_of(ex):
+    """How an export's graphs are built (node_features absent: the paper's)."""
+    d = ex.desc
+    return {"max_nodes": d["max_nodes"], "edge_weight": d["edge_weight"], "node_features": d.get("node_features", "appearance")}
+
+
 def load(paths):
     parts = {"x": [], "adj": [], "label": [], "split": [], "scenario": []}
+    graphs = set()
     for p in paths:
         ex = Export(p)
+        graphs.add(tuple(graph_of(ex).items()))
         for k in ("x", "adj", "label", "split"):
             parts[k].append(np.asarray(ex.spatial(k)))
         parts["scenario"].append(np.full(len(parts["label"][-1]), ex.scenario, np.int64))
-    return {k: np.concatenate(v) for k, v in parts.items()}
+    if len(graphs) != 1:
+        raise SystemExit(f"the exports build their graphs differently: {sorted(graphs)}")
+    return {k: np.concatenate(v) for k, v in parts.items()}, dict(graphs.pop())
 
 
 def accuracy(model, x, adj, y, batch=1024):
@@ -51,13 +63,13 @@ def main():
     torch.manual_seed(a.seed)
     torch.set_num_threads(a.threads)
     started = time.time()
-    d = load(a.data)
+    d, graph = load(a.data)
     x, adj = torch.from_numpy(d["x"]), torch.from_numpy(d["adj"])
     y = torch.from_numpy(d["label"].astype(np.int64))
     sel = {s: torch.from_numpy(np.flatnonzero(d["split"] == v)) for s, v in SPLITS.items()}
     print(f"gcn: {len(y)} graphs ({', '.join(f'{s} {len(i)}' for s, i in sel.items())})", flush=True)
 
-    model = GCN()
+    model = GCN(features=x.shape[-1])
     opt = torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=1e-4)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, a.epochs)
     loss_fn = nn.CrossEntropyLoss()
@@ -96,6 +108,7 @@ def main():
     with open(os.path.join(a.out, "gcn_reference.json"), "w") as f:
         json.dump(reference, f, separators=(",", ":"))
     report = {
+        **graph,
         "graphs": {s: len(i) for s, i in sel.items()},
         "epochs": a.epochs,
         "seed": a.seed,

@@ -43,7 +43,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
 use spwi_agent::floor::{self, FACING_DIM, RELATION_DIM};
-use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
+use spwi_agent::graph::{GraphBuilder, NodeFeatures, OnFloor, NODE_FEATURE_DIM};
 use spwi_agent::model::{Backend, Gcn};
 use spwi_agent::temporal::normalise_keypoints;
 use spwi_proto::{DetectionFrame, RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
@@ -73,6 +73,8 @@ pub struct DatasetOptions {
     /// Graph size and edge weights; from the GCN's manifest when given.
     pub max_nodes: usize,
     pub edge_weight: spwi_agent::graph::EdgeWeight,
+    /// What the graph's distances and node features are made of.
+    pub node_features: NodeFeatures,
     /// The GCN file whose embeddings fill the temporal part, if any.
     pub gcn: Option<PathBuf>,
     /// Also write the worker node's feature per row (temporal/human_feature.npy).
@@ -183,7 +185,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     let n = o.max_nodes;
     let f = |d: &Path, name: &str| d.join(format!("{name}.npy"));
     let mut sp = Spatial {
-        x: NpyWriter::create(&f(&sd, "x"), &[n, NODE_FEATURE_DIM])?,
+        x: NpyWriter::create(&f(&sd, "x"), &[n, o.node_features.dim()])?,
         adj: NpyWriter::create(&f(&sd, "adj"), &[n, n])?,
         mask: NpyWriter::create(&f(&sd, "node_mask"), &[n])?,
         label: NpyWriter::create(&f(&sd, "label"), &[])?,
@@ -215,8 +217,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             .then(|| NpyWriter::create(&f(&td, "human_feature"), &[NODE_FEATURE_DIM]))
             .transpose()?,
     };
-    let mut gcn = o.gcn.as_ref().map(|file| Gcn::load(file, n, Backend::Tract, None)).transpose()?;
-    let mut graph = GraphBuilder::new(n, o.edge_weight);
+    let mut gcn = o.gcn.as_ref().map(|file| Gcn::load(file, n, o.node_features, Backend::Tract, None)).transpose()?;
+    let mut graph = GraphBuilder::new(n, o.edge_weight, o.node_features);
     let ids: Vec<RobotId> = (0..o.robots).map(|i| RobotId::new(format!("r{i}"))).collect::<Result<_, _>>()?;
     let progress = crate::progress::Progress::new("episodes exported", o.episodes as u64, 5);
     let mut episode_conditions = Vec::with_capacity(o.episodes as usize);
@@ -250,6 +252,10 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             }
             let frames: Vec<DetectionFrame> =
                 ids.iter().enumerate().map(|(slot, id)| world.observe(slot, id)).collect();
+            // What each robot's engine computes from its frame and, at its vote step,
+            // every other robot of the episode being a peer whose estimate and
+            // landmarks arrived.
+            let all = team_floor.observe(&frames);
             let mut tick_rows = Vec::with_capacity(o.robots);
             for (slot, frame) in frames.iter().enumerate() {
                 let keypoints = frame
@@ -271,7 +277,8 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                     facing_ego: vec![0.0; FACING_DIM],
                     facing_team: vec![0.0; FACING_DIM],
                 };
-                if let Some(g) = graph.build(frame) {
+                let on_floor = all[slot].own.as_ref().map(|worker| OnFloor { camera: &camera, worker });
+                if let Some(g) = graph.build(frame, on_floor) {
                     if t % o.spatial_every == 0 {
                         sp.x.push(&g.x)?;
                         sp.adj.push(&g.adj)?;
@@ -294,9 +301,6 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 }
                 tick_rows.push(row);
             }
-            // What each robot's engine computes at its vote step, every other robot of
-            // the episode being a peer whose estimate and landmarks arrived.
-            let all = team_floor.observe(&frames);
             for (slot, (row, h)) in tick_rows.iter_mut().zip(&all).enumerate() {
                 let v = team_floor.view(slot);
                 let (own_stations, team_stations) = (v.own_map.stations(), v.team_map.stations());
@@ -402,12 +406,12 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         "classes": spwi_proto::Station::ALL.map(spwi_proto::Station::name),
         "max_nodes": n,
         "edge_weight": o.edge_weight,
-        "gcn": o.gcn.as_ref().map(|file| json!({"file": file})),
+        "node_features": o.node_features,
         "spatial": {
             "samples": samples,
             "sampling": format!("every {}th tick of each robot, when it sees the worker", o.spatial_every),
             "arrays": {
-                "x": ["float32", ["samples", n, NODE_FEATURE_DIM], "node features: global scene feature ‖ local feature; node 0 is the worker; padding rows are zero"],
+                "x": ["float32", ["samples", n, o.node_features.dim()], "node features: global scene feature ‖ local feature (‖ floor relations with node_features floor_relations: agent/src/graph.rs); node 0 is the worker; padding rows are zero"],
                 "adj": ["float32", ["samples", n, n], "normalised adjacency D^-1/2 (A + I) D^-1/2 of the star graph, zero padding"],
                 "node_mask": ["uint8", ["samples", n], "1 for real nodes"],
                 "label": ["uint8", ["samples"], "station the worker is heading to now"],
@@ -444,6 +448,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     });
     // (set apart: one json! of it all exceeds the macro's recursion limit)
     description["conditions"] = conditions;
+    description["gcn"] = json!(o.gcn.as_ref().map(|file| json!({"file": file})));
     // Describe only the arrays this export wrote.
     let optional =
         [("embedding", o.gcn.is_some()), ("gcn_logits", o.gcn.is_some()), ("human_feature", o.human_features)];
@@ -487,6 +492,11 @@ pub struct DatasetArgs {
     /// Edge weights, unless --gcn names a model set (then: its manifest's).
     #[arg(long, default_value = "proximity", value_parser = parse_edge_weight)]
     pub edge_weight: spwi_agent::graph::EdgeWeight,
+    /// What the graph is made of, unless --gcn names a model set (then: its
+    /// manifest's): "appearance" (image distances, the paper's) or "floor_relations"
+    /// (floor distances, each node's relations to the worker).
+    #[arg(long, default_value = "appearance", value_parser = parse_node_features)]
+    pub node_features: NodeFeatures,
     /// Also write the worker node's 1024-d feature per row (the 1D-CNN baseline's input).
     #[arg(long)]
     pub human_features: bool,
@@ -516,6 +526,7 @@ pub fn main(a: DatasetArgs) -> Result<()> {
         gcn,
         max_nodes,
         edge_weight,
+        node_features,
         human_features,
         track_share,
         warm_share,
@@ -527,12 +538,12 @@ pub fn main(a: DatasetArgs) -> Result<()> {
     if episodes == 0 || ticks == 0 {
         anyhow::bail!("--episodes and --ticks must be at least 1");
     }
-    let (gcn, max_nodes, edge_weight) = match gcn {
+    let (gcn, max_nodes, edge_weight, node_features) = match gcn {
         Some(dir) if dir.is_dir() => {
             let m = spwi_agent::manifest::Manifest::load(&dir)?;
-            (Some(dir.join(&m.models.gcn.file)), m.max_nodes, m.edge_weight)
+            (Some(dir.join(&m.models.gcn.file)), m.max_nodes, m.edge_weight, m.node_features)
         }
-        file => (file, max_nodes, edge_weight),
+        file => (file, max_nodes, edge_weight, node_features),
     };
     if !(1..=256).contains(&max_nodes) {
         anyhow::bail!("--max-nodes {max_nodes}: must be within 1..=256");
@@ -550,6 +561,7 @@ pub fn main(a: DatasetArgs) -> Result<()> {
         layouts: world.describe(),
         max_nodes,
         edge_weight,
+        node_features,
         gcn,
         human_features,
         mix,
@@ -562,9 +574,18 @@ pub fn main(a: DatasetArgs) -> Result<()> {
     Ok(())
 }
 
-fn parse_edge_weight(s: &str) -> Result<spwi_agent::graph::EdgeWeight, String> {
+/// One of a manifest's named choices, as the manifest spells it.
+fn parse_choice<T: serde::de::DeserializeOwned>(s: &str, what: &str, choices: &str) -> Result<T, String> {
     serde_json::from_value(serde_json::Value::String(s.to_owned()))
-        .map_err(|_| format!("unknown edge weight {s:?}; use \"proximity\" or \"distance\""))
+        .map_err(|_| format!("unknown {what} {s:?}; use {choices}"))
+}
+
+fn parse_edge_weight(s: &str) -> Result<spwi_agent::graph::EdgeWeight, String> {
+    parse_choice(s, "edge weight", "\"proximity\" or \"distance\"")
+}
+
+fn parse_node_features(s: &str) -> Result<NodeFeatures, String> {
+    parse_choice(s, "node features", "\"appearance\" or \"floor_relations\"")
 }
 
 #[cfg(test)]
@@ -576,6 +597,10 @@ mod tests {
     }
 
     fn export_mixed(dir: &Path, gcn: Option<PathBuf>, mix: TrainingMix) -> (u64, u64) {
+        export_with(dir, gcn, mix, NodeFeatures::Appearance)
+    }
+
+    fn export_with(dir: &Path, gcn: Option<PathBuf>, mix: TrainingMix, node_features: NodeFeatures) -> (u64, u64) {
         let _ = std::fs::remove_dir_all(dir);
         export(&DatasetOptions {
             scenario: Scenario::Dynamic,
@@ -589,6 +614,7 @@ mod tests {
             layouts: "test".into(),
             max_nodes: 16,
             edge_weight: spwi_agent::graph::EdgeWeight::Proximity,
+            node_features,
             gcn,
             human_features: true,
             mix,
@@ -646,6 +672,41 @@ mod tests {
     }
 
     #[test]
+    fn floor_relation_graphs_carry_the_track_on_the_worker_node_and_a_relation_on_objects() {
+        let base = std::env::temp_dir().join(format!("spwi-dataset-floor-{}", std::process::id()));
+        let (plain, floor) = (base.join("plain"), base.join("floor"));
+        // Cameras that follow the worker: objects beside it in most frames.
+        let tracking = TrainingMix::new(1.0, 0.0, 0).unwrap();
+        let (samples, _) = export_mixed(&plain, None, tracking);
+        assert_eq!(export_with(&floor, None, tracking, NodeFeatures::FloorRelations).0, samples);
+        let floats = |dir: &Path| -> Vec<f32> {
+            npy_data(dir, "spatial/x.npy").chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()
+        };
+        let (a, f) = (floats(&plain), floats(&floor));
+        let dim = NodeFeatures::FloorRelations.dim();
+        assert_eq!((a.len() / NODE_FEATURE_DIM, f.len() / dim), (samples as usize * 16, samples as usize * 16));
+        let (mut tracked, mut related) = (0, 0);
+        for (node, (plain_row, row)) in a.chunks_exact(NODE_FEATURE_DIM).zip(f.chunks_exact(dim)).enumerate() {
+            let relations = &row[NODE_FEATURE_DIM..];
+            if node % 16 == 0 {
+                // The worker: its appearance as before (objects may come in another
+                // order, now by floor distance), the track's values or nothing.
+                assert_eq!(&row[..NODE_FEATURE_DIM], plain_row);
+                assert!(relations[floor::relations::TRACK_VALUES..].iter().all(|&v| v == 0.0));
+                tracked += usize::from(relations[0] == 1.0);
+            } else {
+                assert!(relations[..floor::relations::TRACK_VALUES].iter().all(|&v| v == 0.0));
+                related += usize::from(relations[floor::relations::TRACK_VALUES] == 1.0);
+            }
+        }
+        // Most graphs are of a tracked worker, and objects are placed on the floor.
+        assert!(tracked * 2 > samples as usize, "{tracked} of {samples} graphs with a track");
+        let objects = f.chunks_exact(dim).enumerate().filter(|(i, r)| i % 16 != 0 && r[0] != 0.0).count();
+        assert!(related > 0 && related <= objects, "{related} of {objects} objects placed on the floor");
+        std::fs::remove_dir_all(base).unwrap();
+    }
+
+    #[test]
     fn the_description_lists_only_the_arrays_written() {
         let dir = std::env::temp_dir().join(format!("spwi-dataset-plain-{}", std::process::id()));
         export_to(&dir, None);
@@ -663,6 +724,7 @@ mod tests {
             "split",
             "max_nodes",
             "edge_weight",
+            "node_features",
         ] {
             assert!(d.get(key).is_some(), "dataset.json lacks {key:?}");
         }

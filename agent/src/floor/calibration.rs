@@ -152,21 +152,27 @@ impl CameraCalibration {
         self.worker_facing(frame.pose.as_ref()?, &frame.human.as_ref()?.keypoints)
     }
 
-    /// The detected objects that mark one station, on the floor: the middle of each
-    /// box's bottom edge meets the floor at the object's near side. Boxes cut by the
-    /// image's lower edge, far or doubtful detections, and chairs (found at two kinds
-    /// of station) are left out.
+    /// Where a detected object stands on the floor, and how sure that is (m): the
+    /// middle of its box's bottom edge meets the floor at the object's near side.
+    /// `None` for a box cut by the image's lower edge (its bottom is not in view).
+    pub fn footprint(&self, pose: &FloorPose, object: &ObjectDetection) -> Option<([f32; 2], f32)> {
+        let bottom = (object.bbox.x + object.bbox.w / 2.0, object.bbox.y + object.bbox.h);
+        if !self.inside(bottom) {
+            return None;
+        }
+        self.back_project(pose, bottom, 0.0)
+    }
+
+    /// The detected objects that mark one station, on the floor ([`Self::footprint`]).
+    /// Boxes cut by the image's lower edge, far or doubtful detections, and chairs
+    /// (found at two kinds of station) are left out.
     pub fn landmarks(&self, pose: &FloorPose, objects: &[ObjectDetection]) -> Vec<Landmark> {
         objects
             .iter()
             .filter(|o| o.class != ObjectClass::Chair && o.score >= LANDMARK_SCORE)
             .filter_map(|o| {
                 let station = o.class.station()?;
-                let bottom = (o.bbox.x + o.bbox.w / 2.0, o.bbox.y + o.bbox.h);
-                if !self.inside(bottom) {
-                    return None;
-                }
-                let (position, sigma) = self.back_project(pose, bottom, 0.0)?;
+                let (position, sigma) = self.footprint(pose, o)?;
                 let range = (position[0] - pose.position[0]).hypot(position[1] - pose.position[1]);
                 (range <= LANDMARK_RANGE).then_some(Landmark { station, position, sigma })
             })

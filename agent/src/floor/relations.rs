@@ -45,26 +45,37 @@ pub fn relations(worker: Option<&WorkerEstimate>, stations: &[Option<[f32; 2]>; 
     assert_eq!(out.len(), RELATION_DIM);
     out.fill(0.0);
     let Some(w) = worker else { return };
+    track_values(w, &mut out[..TRACK_VALUES]);
+    for (s, at) in stations.iter().enumerate() {
+        if let Some(at) = at {
+            relation_to(w, *at, &mut out[TRACK_VALUES + s * PER_STATION..TRACK_VALUES + (s + 1) * PER_STATION]);
+        }
+    }
+}
+
+/// The track values of a worker estimate into `out` (length [`TRACK_VALUES`]):
+/// `[1, speed (m/s), position sigma (m)]`.
+pub fn track_values(w: &WorkerEstimate, out: &mut [f32]) {
+    out.copy_from_slice(&[1.0, w.velocity[0].hypot(w.velocity[1]), w.covariance[0].max(0.0).sqrt()]);
+}
+
+/// The worker's relation to one point of the floor into `out` (length
+/// [`PER_STATION`]): `[1, distance / 10 m, closing speed, sideways speed, cos bearing,
+/// sin bearing]`, the bearing relative to the worker's motion (zero below [`MOVING`]).
+pub fn relation_to(w: &WorkerEstimate, at: [f32; 2], out: &mut [f32]) {
     let v = w.velocity;
     let speed = v[0].hypot(v[1]);
+    let d = [at[0] - w.position[0], at[1] - w.position[1]];
+    let dist = d[0].hypot(d[1]);
+    let u = if dist > 1e-3 { [d[0] / dist, d[1] / dist] } else { [0.0, 0.0] };
+    out.fill(0.0);
     out[0] = 1.0;
-    out[1] = speed;
-    out[2] = w.covariance[0].max(0.0).sqrt();
-    for (s, at) in stations.iter().enumerate() {
-        let Some(at) = at else { continue };
-        let d = [at[0] - w.position[0], at[1] - w.position[1]];
-        let dist = d[0].hypot(d[1]);
-        let u = if dist > 1e-3 { [d[0] / dist, d[1] / dist] } else { [0.0, 0.0] };
-        let o = &mut out[TRACK_VALUES + s * PER_STATION..TRACK_VALUES + (s + 1) * PER_STATION];
-        o[0] = 1.0;
-        o[1] = dist / 10.0;
-        o[2] = u[0] * v[0] + u[1] * v[1]; // rate at which the distance shrinks
-        o[3] = u[0] * v[1] - u[1] * v[0];
-        if speed >= MOVING && dist > 1e-3 {
-            let (c, sn) = ((u[0] * v[0] + u[1] * v[1]) / speed, (v[0] * u[1] - v[1] * u[0]) / speed);
-            o[4] = c;
-            o[5] = sn;
-        }
+    out[1] = dist / 10.0;
+    out[2] = u[0] * v[0] + u[1] * v[1]; // rate at which the distance shrinks
+    out[3] = u[0] * v[1] - u[1] * v[0];
+    if speed >= MOVING && dist > 1e-3 {
+        out[4] = (u[0] * v[0] + u[1] * v[1]) / speed;
+        out[5] = (v[0] * u[1] - v[1] * u[0]) / speed;
     }
 }
 

@@ -13,7 +13,7 @@ mod tract;
 pub use tract::{profile_nodes, NodeTime};
 
 use crate::floor::RELATION_DIM;
-use crate::graph::StarGraph;
+use crate::graph::{NodeFeatures, StarGraph};
 use crate::manifest::{Dim, GcnNodes, Manifest, ModelKind, ModelSpec};
 use crate::temporal::TemporalModel;
 use anyhow::{bail, Context, Result};
@@ -111,7 +111,7 @@ impl ModelSet {
     /// Run state for one robot using `temporal` as its GRU.
     pub fn inference(self: &Arc<Self>, temporal: TemporalModel) -> Result<Inference> {
         let gru = self.runner(ModelKind::gru(temporal))?;
-        let gcn = Gcn::new(self.gcn.runner()?, self.manifest.gcn_nodes());
+        let gcn = Gcn::new(self.gcn.runner()?, self.manifest.gcn_nodes(), self.manifest.node_features);
         Ok(Inference { set: Arc::clone(self), gcn, gru, temporal })
     }
 
@@ -147,44 +147,54 @@ pub struct GcnOutput {
 pub struct Gcn {
     runner: Box<dyn Runner>,
     nodes: GcnNodes,
+    features: NodeFeatures,
     /// The real nodes' block of the adjacency ([`GcnNodes::Real`]).
     adj: Vec<f32>,
 }
 
 impl Gcn {
-    fn new(runner: Box<dyn Runner>, nodes: GcnNodes) -> Gcn {
-        Gcn { runner, nodes, adj: Vec::new() }
+    fn new(runner: Box<dyn Runner>, nodes: GcnNodes, features: NodeFeatures) -> Gcn {
+        Gcn { runner, nodes, features, adj: Vec::new() }
     }
 
     /// Loads a lone GCN file, checked against the interface the daemon feeds for
-    /// graphs of at most `max_nodes` nodes: padded to that many when the file fixes its
-    /// node count, only the real ones when it names it.
-    pub fn load(file: &Path, max_nodes: usize, backend: Backend, ort_library: Option<&Path>) -> Result<Gcn> {
+    /// graphs of at most `max_nodes` nodes carrying `features`: padded to that many
+    /// when the file fixes its node count, only the real ones when it names it.
+    pub fn load(
+        file: &Path,
+        max_nodes: usize,
+        features: NodeFeatures,
+        backend: Backend,
+        ort_library: Option<&Path>,
+    ) -> Result<Gcn> {
         let (spec, nodes) = match crate::manifest::declared_node_dim(file)? {
-            Some(name) => (ModelSpec::gcn(Dim::Named(name)), GcnNodes::Real),
-            None => (ModelSpec::gcn(Dim::Fixed(max_nodes)), GcnNodes::Padded(max_nodes)),
+            Some(name) => (ModelSpec::gcn(Dim::Named(name), features), GcnNodes::Real),
+            None => (ModelSpec::gcn(Dim::Fixed(max_nodes), features), GcnNodes::Padded(max_nodes)),
         };
         crate::manifest::check_onnx(file, &spec)?;
-        Ok(Gcn::new(load_file(file, backend, ort_library)?.runner()?, nodes))
+        Ok(Gcn::new(load_file(file, backend, ort_library)?.runner()?, nodes, features))
     }
 
     /// The worker node's embedding and the spatial-only logits.
     pub fn run(&mut self, g: &StarGraph) -> Result<GcnOutput> {
-        use crate::graph::NODE_FEATURE_DIM as F;
+        let f = self.features.dim();
+        if g.dim != f {
+            bail!("the GCN takes nodes of {f} features ({:?}), this graph's have {}", self.features, g.dim);
+        }
         let out = match self.nodes {
             GcnNodes::Padded(n) => {
                 if n != g.max_nodes {
                     bail!("the GCN takes graphs of {n} nodes, this one has room for {}", g.max_nodes);
                 }
                 self.runner
-                    .run(&[Input { shape: &[1, n, F], data: &g.x }, Input { shape: &[1, n, n], data: &g.adj }])?
+                    .run(&[Input { shape: &[1, n, f], data: &g.x }, Input { shape: &[1, n, n], data: &g.adj }])?
             }
             GcnNodes::Real => {
                 let (n, stride) = (g.nodes, g.max_nodes);
                 self.adj.clear();
                 self.adj.extend((0..n).flat_map(|i| &g.adj[i * stride..i * stride + n]));
                 self.runner.run(&[
-                    Input { shape: &[1, n, F], data: &g.x[..n * F] },
+                    Input { shape: &[1, n, f], data: &g.x[..n * f] },
                     Input { shape: &[1, n, n], data: &self.adj },
                 ])?
             }

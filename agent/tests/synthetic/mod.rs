@@ -1,7 +1,8 @@
 //! A made-up detection frame, shared by the golden tests and the stage benchmark
 //! (`agent/benches/stages.rs` includes this file by path): the worker in the middle of
 //! a 640 × 480 image and `objects` objects in a row below it, each class in turn and
-//! each with an appearance feature of its own, seen by a robot at a fixed floor pose.
+//! each with an appearance feature of its own, seen by a robot at a fixed floor pose,
+//! and the worker's track on that floor.
 
 use spwi_proto::*;
 
@@ -27,4 +28,14 @@ pub fn frame(tick: u64, objects: usize) -> DetectionFrame {
             .collect(),
         scene_feature: feature(0.0),
     }
+}
+
+/// Where the worker of [`frame`] stands and walks, as the robot's track has it: what a
+/// floor-relations graph places the frame's objects against.
+pub static WORKER: WorkerEstimate =
+    WorkerEstimate { position: [5.0, 4.5], velocity: [0.8, 0.3], covariance: [0.04, 0.0, 0.1] };
+
+/// [`frame`] on the floor, through `camera`.
+pub fn on_floor(camera: &spwi_agent::floor::CameraCalibration) -> spwi_agent::graph::OnFloor<'_> {
+    spwi_agent::graph::OnFloor { camera, worker: &WORKER }
 }

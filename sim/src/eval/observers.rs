@@ -8,7 +8,7 @@
 use super::cvm::{Cvm, HEAD_HEIGHT};
 use anyhow::Result;
 use spwi_agent::floor::{CameraCalibration, FloorView};
-use spwi_agent::graph::{GraphBuilder, NODE_FEATURE_DIM};
+use spwi_agent::graph::{GraphBuilder, NodeFeatures, NODE_FEATURE_DIM};
 use spwi_agent::manifest::ModelKind;
 use spwi_agent::model::{Inference, Input, ModelSet, Runner};
 use spwi_agent::temporal::{frame_offsets, normalise_keypoints, Row, RowLayout, TemporalModel, Window, CNN1D_DIM};
@@ -71,7 +71,8 @@ impl Observers {
     pub fn new(models: &Arc<ModelSet>, camera: CameraCalibration, cnn1d: bool) -> Result<Self> {
         let m = &models.manifest;
         Ok(Observers {
-            graph: GraphBuilder::new(m.max_nodes, m.edge_weight),
+            // The 1D-CNN reads the worker node's appearance only: no floor needed.
+            graph: GraphBuilder::new(m.max_nodes, m.edge_weight, NodeFeatures::Appearance),
             ego: models.inference(TemporalModel::Ego)?,
             ego_rows: Window::with_frames(m.window, m.frames(), m.row),
             cnn1d: (cnn1d && m.models.cnn1d.is_some()).then(|| models.runner(ModelKind::Cnn1d)).transpose()?,
@@ -95,7 +96,7 @@ impl Observers {
         self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
         self.facing = (self.row_layout == RowLayout::RelationsFacing).then(|| self.camera.facing_in(frame)).flatten();
         if self.cnn1d.is_some() {
-            if let Some(g) = self.graph.build(frame) {
+            if let Some(g) = self.graph.build(frame, None) {
                 let mut row = g.x[..NODE_FEATURE_DIM].to_vec(); // node 0: the worker
                 row.extend_from_slice(self.keypoints.as_deref().unwrap_or(&[]));
                 row.resize(CNN1D_DIM, 0.0);
