@@ -230,40 +230,37 @@ fn a_manifest_inconsistent_with_the_daemon_is_refused() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+/// How loading a copy of the fixture fails once its manifest's `key` says `value`
+/// (`{:#}`, as the daemon prints a failed start).
+fn refusal_of_fixture_with(key: &str, value: &str) -> String {
+    let dir = fixture_copy(&format!("{key}-{value}"));
+    let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
+    m[key] = value.into();
+    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    let e = format!("{:#}", ModelSet::load(&dir, Backend::Tract, None).unwrap_err());
+    std::fs::remove_dir_all(dir).unwrap();
+    e
+}
+
 #[test]
 fn a_set_whose_rows_the_daemon_cannot_build_is_refused_naming_the_tensor() {
     // The fixture GRUs read the paper's rows; a manifest claiming relation rows must not
     // load (the daemon would feed 61 values per row to a model that reads 162).
-    let dir = fixture_copy("rows");
-    let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
-    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
-    m["row"] = "relations".into();
-    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
-    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    let e = refusal_of_fixture_with("row", "relations");
     assert!(e.contains("ego_gru") && e.contains("Relations") && e.contains("[1, 20, 61]"), "{e}");
-    m["row"] = "holograms".into();
-    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
-    let e = format!("{:#}", ModelSet::load(&dir, Backend::Tract, None).unwrap_err());
+    let e = refusal_of_fixture_with("row", "holograms");
     assert!(e.contains("manifest.json") && e.contains("holograms"), "{e}");
-    std::fs::remove_dir_all(dir).unwrap();
 }
 
 #[test]
 fn a_set_whose_graphs_the_daemon_cannot_build_is_refused_naming_the_tensor() {
     // The fixture's GCN reads appearance only (1024 values a node); a manifest claiming
     // floor relations must not load (the daemon would feed 1033).
-    let dir = fixture_copy("graphs");
-    let text = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
-    let mut m: serde_json::Value = serde_json::from_str(&text).unwrap();
-    m["node_features"] = "floor_relations".into();
-    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
-    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    let e = refusal_of_fixture_with("node_features", "floor_relations");
     assert!(e.contains("gcn") && e.contains("FloorRelations") && e.contains("1033]") && e.contains("1024]"), "{e}");
-    m["node_features"] = "x-ray".into();
-    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
-    let e = format!("{:#}", ModelSet::load(&dir, Backend::Tract, None).unwrap_err());
+    let e = refusal_of_fixture_with("node_features", "x-ray");
     assert!(e.contains("manifest.json") && e.contains("x-ray"), "{e}");
-    std::fs::remove_dir_all(dir).unwrap();
 }
 
 #[test]
