@@ -143,10 +143,6 @@ impl GraphBuilder {
         }
     }
 
-    pub fn features(&self) -> NodeFeatures {
-        self.features
-    }
-
     /// The star graph of a frame, or `None` when the frame does not show the worker
     /// (the system is only activated when a human is detected). `floor` is read by a
     /// [`NodeFeatures::FloorRelations`] builder only, and only with the frame's pose.

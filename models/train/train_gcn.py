@@ -5,7 +5,8 @@ Usage: train_gcn.py --data DIR [DIR ...] --out DIR [--epochs 12] [--seed 1]
 Writes OUT/gcn.onnx, OUT/gcn_reference.json and OUT/gcn.json (the graphs it reads —
 max_nodes, edge_weight, node_features, as the exports describe them — settings, test
 accuracy per scenario, time). The graph's node features are the exports' (`spwi-sim
-dataset --node-features`): appearance (the paper's) or appearance and floor relations. The temporal datasets are then exported by running this gcn.onnx
+dataset --node-features`): appearance (the paper's) or appearance and floor relations.
+The temporal datasets are then exported by running this gcn.onnx
 through the agent's own Rust code (`spwi-sim dataset --gcn OUT/gcn.onnx`).
 """
 import argparse
@@ -20,12 +21,7 @@ from torch import nn
 from data import SPLITS, Export
 from export import export
 from nets import GCN
-
-
-def graph_of(ex):
-    """How an export's graphs are built (node_features absent: the paper's)."""
-    d = ex.desc
-    return {"max_nodes": d["max_nodes"], "edge_weight": d["edge_weight"], "node_features": d.get("node_features", "appearance")}
+from set_gcn import graph_of
 
 
 def load(paths):
@@ -33,7 +29,7 @@ def load(paths):
     graphs = set()
     for p in paths:
         ex = Export(p)
-        graphs.add(tuple(graph_of(ex).items()))
+        graphs.add(tuple(graph_of({}, ex.desc).items()))  # how its graphs are built
         for k in ("x", "adj", "label", "split"):
             parts[k].append(np.asarray(ex.spatial(k)))
         parts["scenario"].append(np.full(len(parts["label"][-1]), ex.scenario, np.int64))
