@@ -91,11 +91,12 @@ if [ -z "${STAGE2_ONLY:-}" ]; then
     cp "$from/gcn.onnx" "$(gcn_dir "$kind")/"
     "$PY" - "$from" "$(gcn_dir "$kind")" <<'PY'
 import json, sys
+sys.path.insert(0, "models/train")
+from set_gcn import graph_of
 src, out = sys.argv[1:]
 m = json.load(open(f"{src}/manifest.json"))
 json.dump(json.load(open(f"{src}/reference.json"))["gcn"], open(f"{out}/gcn_reference.json", "w"))
-graph = {"max_nodes": m["max_nodes"], "edge_weight": m["edge_weight"], "node_features": m.get("node_features", "appearance")}
-json.dump({**m["training"]["gcn"], **graph, "from": src}, open(f"{out}/gcn.json", "w"))
+json.dump({**m["training"]["gcn"], **graph_of({}, m), "from": src}, open(f"{out}/gcn.json", "w"))
 PY
   done
   for kind in appearance ${needs_floor:+floor_relations}; do
