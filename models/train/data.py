@@ -12,9 +12,7 @@ With `peer_set` too, the collective's rows are the team's as the robot holds it 
 hears a random subset of its peers (`relations_heard`), and a second input holds one
 relation block per peer it heard (`relations_peers`). With `facing`, each relation row
 also ends with where the worker's body faces against each station (`facing_ego` or
-`facing_team`: agent/src/floor/relations.rs, `facing`). With `gcn` too, each row then
-ends with the GCN's verdict on the tick's star graph: [known] ‖ the softmax of its logits,
-the robot's own (ego) or the mean over every robot that sees the worker (collective).
+`facing_team`: agent/src/floor/relations.rs, `facing`).
 """
 import json
 import os
@@ -32,8 +30,6 @@ PER_STATION = 6
 RELATIONS = TRACK_VALUES + CLASSES * PER_STATION
 # agent/src/floor/relations.rs: FACING_DIM ([facing known] + 4 stations x [cos, sin])
 FACING = 1 + CLASSES * 2
-# [known] + the GCN's class probabilities
-GCN_BLOCK = 1 + CLASSES
 SPLITS = {"train": 0, "validation": 1, "test": 2}
 
 
@@ -116,24 +112,7 @@ def gather(seqs, e, t, r, window, frames):
     return tt.clamp(min=0), valid
 
 
-def gcn_block(seqs, E, tt, R, kind, embedding=False):
-    """[known] ‖ GCN class probabilities [B, F, GCN_BLOCK]: the robot's own when it sees
-    the worker (ego), the mean over the robots that see it (collective)."""
-    if kind == "ego":
-        seen = seqs.seen[E, tt, R].float()[..., None]
-        parts = [seen, torch.softmax(seqs.gcn_logits[E, tt, R], -1) * seen]
-        if embedding:
-            parts.append(seqs.emb[E, tt, R] * seen)
-        return torch.cat(parts, -1)
-    seen = seqs.seen[E, tt].float()[..., None]  # [B, F, R, 1]
-    n = seen.sum(2)
-    parts = [(n > 0).float(), (torch.softmax(seqs.gcn_logits[E, tt], -1) * seen).sum(2) / n.clamp(min=1)]
-    if embedding:
-        parts.append((seqs.emb[E, tt] * seen).sum(2) / n.clamp(min=1))
-    return torch.cat(parts, -1)
-
-
-def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1, relations=False, peer_set=False, facing=False, gcn=False):
+def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop=0.1, relations=False, peer_set=False, facing=False):
     """The model's inputs (a tuple: rows [B, F, D], and for a peer set the peer blocks
     [B, F, P, RELATIONS]) and labels [B, H+1] for `kind` in ego, collective, cnn1d
     (with `relations`, ego and collective rows end with the relation block, and with
@@ -159,8 +138,6 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
             if seqs.facing_team is None:
                 raise SystemExit("a facing model needs an export with facing_ego and facing_team (spwi-sim dataset, 2026-12-02 on)")
             parts.append((seqs.facing_ego if kind == "ego" else seqs.facing_team)[E, tt, R] * v)
-        if gcn:  # ‖ the GCN's verdict
-            parts.append(gcn_block(seqs, E, tt, R, kind, embedding=gcn == "embedding") * v)
         return (torch.cat(parts, -1),), labels
     if kind == "ego":
         return (torch.cat([seqs.emb[E, tt, R] * v, kp], -1),), labels

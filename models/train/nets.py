@@ -20,7 +20,7 @@ import functools
 import torch
 from torch import nn
 
-from data import CLASSES, EMBEDDING, FACING, FEATURE, GCN_BLOCK, KEYPOINTS, PER_STATION, RELATIONS, TRACK_VALUES
+from data import CLASSES, EMBEDDING, FACING, FEATURE, KEYPOINTS, PER_STATION, RELATIONS, TRACK_VALUES
 
 
 class GCN(nn.Module):
@@ -181,20 +181,10 @@ class FacingScorer(StationScorer):
     to where the worker's body faces). Each station's row gains its own two values and
     the known flag, so the rule learned holds for every station alike."""
 
-    def __init__(self, horizon, gcn=False, emb=8, **kw):
-        super().__init__(horizon, extra=3 + (2 if gcn else 0) + (emb if gcn == "embedding" else 0), **kw)
-        self.gcn = gcn
-        if gcn == "embedding":
-            self.emb = nn.Sequential(nn.Dropout(0.3), nn.Linear(EMBEDDING, emb))
+    def __init__(self, horizon, **kw):
+        super().__init__(horizon, extra=3, **kw)
 
     def forward(self, x):
         face = x[..., KEYPOINTS + RELATIONS : KEYPOINTS + RELATIONS + FACING]
         known, bearings = face[..., 0:1], face[..., 1:].unflatten(-1, (CLASSES, 2))
-        parts = [*self.station_parts(x[..., : KEYPOINTS + RELATIONS]), known, bearings]
-        if self.gcn:  # each station's row gains the GCN's probability of it, and whether it saw
-            g = x[..., KEYPOINTS + RELATIONS + FACING : KEYPOINTS + RELATIONS + FACING + GCN_BLOCK]
-            parts += [g[..., 0:1], g[..., 1:, None]]
-            if self.gcn == "embedding":
-                e = x[..., KEYPOINTS + RELATIONS + FACING + GCN_BLOCK :]
-                parts.append(torch.relu(self.emb(e)))
-        return self.score(station_rows(*parts))
+        return self.score(station_rows(*self.station_parts(x[..., : KEYPOINTS + RELATIONS]), known, bearings))

@@ -37,7 +37,7 @@ def logits_for(model, seqs, ends, a, kind, chunk=2048):
     with torch.no_grad():
         for i in range(0, len(ends[0]), chunk):
             e, t, r = (x[i : i + chunk] for x in ends)
-            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing, gcn=a.gcn_rows)
+            x, y = batch(seqs, e, t, r, a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing)
             out.append(model(*x))
             labels.append(y)
     if not out:
@@ -86,7 +86,7 @@ def train(kind, all_seqs, a, rng):
     elif a.relations and a.peer_set and kind == "collective":
         model = PeerSetScorer(a.horizon, slots=all_seqs[0].rel_peers.shape[-2])
     elif a.relations and a.facing:
-        model = FacingScorer(a.horizon, gcn=a.gcn_rows)
+        model = FacingScorer(a.horizon)
     elif a.relations:
         model = StationScorer(a.horizon)
     else:
@@ -109,7 +109,7 @@ def train(kind, all_seqs, a, rng):
             i = torch.from_numpy(rng.integers(0, len(e), batch_size))
             peer_rng = rng if kind == "collective" else None
             x, y = batch(
-                s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng, relations=a.relations, peer_set=a.peer_set, facing=a.facing, gcn=a.gcn_rows
+                s, e[i], t[i], r[i], a.window, a.frames, a.horizon, kind, peer_rng=peer_rng, relations=a.relations, peer_set=a.peer_set, facing=a.facing
             )
             loss = nn.functional.cross_entropy(model(*x).reshape(-1, CLASSES), y.reshape(-1))
             opt.zero_grad()
@@ -140,7 +140,7 @@ def reference_window(s, a, kind):
     parts of the model untested)."""
     e, t, r = s.ends("test")
     for i in range(0, len(e), 512):
-        x, _ = batch(s, e[i : i + 512], t[i : i + 512], r[i : i + 512], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing, gcn=a.gcn_rows)
+        x, _ = batch(s, e[i : i + 512], t[i : i + 512], r[i : i + 512], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing)
         ok = torch.ones(len(x[0]), dtype=torch.bool)
         if a.relations and kind != "cnn1d":
             known = x[0][:, -1, KEYPOINTS + TRACK_VALUES :: PER_STATION][:, :CLASSES]
@@ -152,7 +152,7 @@ def reference_window(s, a, kind):
         if ok.any():
             j = int(ok.nonzero()[0])
             return tuple(v[j : j + 1] for v in x)
-    x, _ = batch(s, e[:1], t[:1], r[:1], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing, gcn=a.gcn_rows)
+    x, _ = batch(s, e[:1], t[:1], r[:1], a.window, a.frames, a.horizon, kind, relations=a.relations, peer_set=a.peer_set, facing=a.facing)
     return x
 
 
@@ -179,7 +179,6 @@ def main():
     ap.add_argument(
         "--facing", action="store_true", help="with --relations: rows end with where the worker faces against each station (FacingScorer)"
     )
-    ap.add_argument("--gcn-rows", choices=["verdict", "embedding"], help="with --facing: rows end with the GCN's verdict (and its embedding)")
     ap.add_argument("--epochs", type=int, default=10)
     ap.add_argument("--samples", type=int, default=60000, help="training windows per epoch")
     ap.add_argument("--every", type=int, default=2, help="use windows ending every Nth tick")
