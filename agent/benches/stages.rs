@@ -11,6 +11,7 @@ use spwi_agent::engine::{Engine, EngineConfig, Input};
 use spwi_agent::graph::GraphBuilder;
 use spwi_agent::model::{Backend, ModelSet};
 use spwi_agent::temporal::TemporalModel;
+use spwi_agent::trust::TrustBook;
 use spwi_agent::vote;
 use spwi_proto::*;
 use std::hint::black_box;
@@ -95,6 +96,16 @@ fn bench_backend(backend: Backend) {
             .map(|(r, s)| Ballot { robot: r, visibility: 5, trust: 0.9, quality: 0.8, steps: s })
             .collect();
         black_box((v, consensus::decide(&mut ballots, Rule::Trust)));
+    });
+    // After each decision every voter is judged against the others' decision.
+    let mut book = TrustBook::new(Default::default());
+    let ballots: Vec<Ballot<'_>> = ids
+        .iter()
+        .zip(&votes)
+        .map(|(r, s)| Ballot { robot: r, visibility: 5, trust: 0.9, quality: 0.8, steps: s })
+        .collect();
+    measure("learning trust (8 voters, H+1 steps)", 20_000, || {
+        book.learn(black_box(&ballots), Rule::Trust);
     });
     let mut engine = Engine::new(
         EngineConfig {

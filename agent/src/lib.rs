@@ -48,6 +48,6 @@ pub mod router;
 mod stale;
 mod status;
 pub mod temporal;
-mod trust;
+pub mod trust;
 pub mod vote;
 pub mod zenoh_config;

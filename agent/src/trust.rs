@@ -108,16 +108,10 @@ impl TrustBook {
             return;
         }
         let rate = self.rate();
-        let mut others = Vec::with_capacity(ballots.len() - 1);
-        for (i, b) in ballots.iter().enumerate() {
-            others.clear();
-            others.extend(ballots.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, o)| *o));
-            let theirs = consensus::decide_sorted(&others, rule);
-            let judged = b.steps.len().min(theirs.len());
+        for (b, (agreed, judged)) in ballots.iter().zip(consensus::agreement_with_the_others(ballots, rule)) {
             if judged == 0 {
                 continue;
             }
-            let agreed = b.steps.iter().zip(&theirs).filter(|(s, t)| s.class == t.class).count();
             let x = agreed as f32 / judged as f32;
             let r = self.record(b.robot);
             r.votes += rate * (x - r.votes);
