@@ -34,6 +34,9 @@ pub struct TickConfig {
     pub decision_deadline_ms: u64,
     /// Relay the ballots held for a tick this long after it starts (ms; 0: never).
     pub relay_ms: u64,
+    /// How many members relay each tick's ballots: a different few each tick, every
+    /// member when the fleet has no more (`agent/src/engine.rs`, `Engine::relays`).
+    pub relayers: u32,
     /// A camera showing the same worker detection this many frames in a row is frozen:
     /// set aside until it changes (0: never).
     pub stale_after_frames: u32,
@@ -112,6 +115,7 @@ impl Default for TickConfig {
             embedding_wait_ms: 30,
             decision_deadline_ms: 60,
             relay_ms: 40,
+            relayers: 4,
             stale_after_frames: 5,
             consensus: ConsensusRule::Trust,
             alpha: None,
@@ -213,6 +217,9 @@ impl AgentConfig {
                 t.decision_deadline_ms
             );
         }
+        if !(1..=1024).contains(&t.relayers) {
+            bail!("tick.relayers = {}: must be within 1..=1024 (tick.relay_ms = 0 relays nothing)", t.relayers);
+        }
         for (name, v) in [("tick.alpha", t.alpha), ("tick.beta", t.beta)] {
             if let Some(v) = v {
                 if !(v.is_finite() && (0.0..=1000.0).contains(&v)) {
@@ -280,6 +287,9 @@ mod tests {
         assert!(e.contains("tick.relay_ms = 40") && e.contains("below tick.decision_deadline_ms (40)"), "{e}");
         let c: AgentConfig = toml::from_str("[tick]\ndecision_deadline_ms = 40\nrelay_ms = 0\n").unwrap();
         c.validate().expect("relaying nothing is allowed");
+        let c: AgentConfig = toml::from_str("[tick]\nrelayers = 0\n").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("tick.relayers = 0") && e.contains("1..=1024"), "{e}");
         let c: AgentConfig = toml::from_str("[tick]\ntrust_floor = 1.5\n").unwrap();
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("tick.trust_floor = 1.5") && e.contains("0..=1"), "{e}");

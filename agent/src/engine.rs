@@ -14,7 +14,8 @@
 //!          (paper rows: own ‖ mean(peers) ‖ keypoints; relation rows: keypoints ‖
 //!           the worker's relations to the stations, from the team's fused track and map)
 //!            peers' votes arrive
-//! relay_after passed ─► Ballots out (every vote held for the tick, ours and peers')
+//! relay_after passed ─► Ballots out (every vote held for the tick, ours and peers';
+//!                      by the few members that relay this tick)
 //!            peers' relayed ballots fill in votes lost on our own links
 //! a vote from every active member that said it votes, or decision_deadline passed
 //!       ─► consensus ─► Decision out (naming a digest of the ballots counted)
@@ -83,6 +84,10 @@ pub struct EngineConfig {
     /// When to relay the ballots held for a tick, from its start (`None`: never).
     #[serde(default)]
     pub relay_after: Option<Duration>,
+    /// How many members relay a tick's ballots ([`Engine::relays`]; recordings made
+    /// before this field had every member relay).
+    #[serde(default = "every_member")]
+    pub relayers: usize,
     /// A feed showing the same worker detection this many times in a row is stale
     /// (0: never).
     #[serde(default)]
@@ -122,9 +127,14 @@ impl EngineConfig {
             max_open_ticks: tick.max_open_ticks,
             camera: camera.clone(),
             relay_after: (tick.relay_ms > 0).then(|| Duration::from_millis(tick.relay_ms)),
+            relayers: tick.relayers as usize,
             stale_after: tick.stale_after_frames,
         }
     }
+}
+
+fn every_member() -> usize {
+    usize::MAX
 }
 
 /// Everything that can happen to a robot.
@@ -225,6 +235,19 @@ impl Verdict {
     fn of(d: &DecisionMsg) -> Verdict {
         Verdict { class: d.steps.first().map(|s| s.class), voters: d.voters.clone(), digest: d.digest }
     }
+}
+
+/// Where robot `robot` ranks among tick `tick`'s relayers (lower first): FNV-1a of the
+/// two, then a 64-bit finaliser (splitmix64's) so that every bit of the tick moves the
+/// order.
+fn relay_rank(tick: u64, robot: &RobotId) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in tick.to_le_bytes().iter().chain(robot.as_str().as_bytes()) {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+    }
+    h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    h ^ (h >> 31)
 }
 
 /// How many decided ticks are remembered to recognise late messages.
@@ -721,14 +744,16 @@ impl Engine {
         }
     }
 
-    /// Publishes the ballots we hold for tick `t`, once (nothing when we hold none).
+    /// Publishes the ballots we hold for tick `t`, once, if we are one of its relayers
+    /// (nothing when we hold none).
     fn relay(&mut self, t: u64, out: &mut Vec<Output>) {
+        let relays = self.relays(t);
         let tick = self.open.get_mut(&t).expect("open");
         if tick.relayed {
             return;
         }
         tick.relayed = true;
-        if !tick.votes.is_empty() {
+        if relays && !tick.votes.is_empty() {
             out.push(Output::Ballots(BallotsMsg {
                 robot: self.cfg.robot.clone(),
                 instance: self.cfg.instance,
@@ -736,6 +761,24 @@ impl Engine {
                 votes: tick.votes.values().cloned().collect(),
             }));
         }
+    }
+
+    /// Whether we relay tick `t`'s ballots. Every member holding them relaying them
+    /// would send each vote once per member again: n² votes a tick, n − 1 messages to
+    /// each robot, most of a large fleet's traffic (docs/BENCHMARKS.md). A vote lost on
+    /// one link needs only a few other paths, so `relayers` members relay each tick:
+    /// those that rank first by a hash of the tick and their id, a different few each
+    /// tick so that no robot carries it alone; every member when the fleet has no
+    /// more. The members counted are ours and the peers we wait for; two robots that
+    /// count differently for a moment only change how many relay.
+    fn relays(&self, t: u64) -> bool {
+        let k = self.cfg.relayers;
+        if self.live.len() < k {
+            return true; // no more members than relayers, ourselves included
+        }
+        let mine = (relay_rank(t, &self.cfg.robot), &self.cfg.robot);
+        let ahead = self.live.intersection(&self.active).filter(|r| (relay_rank(t, r), *r) < mine).count();
+        ahead < k
     }
 
     fn decide(&mut self, t: u64, by: DecidedBy, now: Duration, out: &mut Vec<Output>) {
@@ -838,6 +881,7 @@ pub(crate) mod tests {
             max_open_ticks: 8,
             camera: CameraCalibration::default(),
             relay_after: None,
+            relayers: 4,
             stale_after: 5,
         };
         Engine::new(cfg, set.inference(TemporalModel::Collective).unwrap())
@@ -1370,6 +1414,42 @@ pub(crate) mod tests {
         let Some(Output::Ballots(b)) = out.first() else { panic!("a relay at 40 ms: {out:?}") };
         assert_eq!((b.tick, b.votes.len(), &b.votes[0].robot), (2, 1, &id("a")));
         assert_eq!(a.next_deadline(), Some(ms(160)), "relayed once; the deadline is next");
+    }
+
+    #[test]
+    fn a_few_members_relay_each_tick_a_different_few_each_time() {
+        let set = models();
+        let names = ["a", "b", "c", "d", "e", "f"];
+        let mut team: Vec<Engine> = names
+            .iter()
+            .map(|r| {
+                let mut e = relaying(r, &set, Some(ms(40)));
+                e.cfg.relayers = 2;
+                for other in names.iter().filter(|o| *o != r) {
+                    e.live.insert(id(other));
+                    e.active.insert(id(other));
+                }
+                e
+            })
+            .collect();
+        let mut relayed = [0; 6];
+        for t in 0..600 {
+            let relayers: Vec<usize> = (0..6).filter(|&i| team[i].relays(t)).collect();
+            assert_eq!(relayers.len(), 2, "tick {t}: every robot counts the same members, so exactly two relay");
+            relayers.iter().for_each(|&i| relayed[i] += 1);
+        }
+        // 200 ticks each if the load is spread evenly (a binomial's sd is 11.5).
+        assert!(relayed.iter().all(|n| (150..=250).contains(n)), "{relayed:?}");
+        // A member we have not heard from yet is not counted: we relay whenever we did,
+        // and on the ticks it ranked ahead of us too.
+        let before: Vec<bool> = (0..600).map(|t| team[0].relays(t)).collect();
+        team[0].active.remove(&id("f"));
+        let after: Vec<bool> = (0..600).map(|t| team[0].relays(t)).collect();
+        assert!(before.iter().zip(&after).all(|(b, a)| !b || *a));
+        assert!(after.iter().filter(|a| **a).count() > relayed[0]);
+        // No more members than relayers: every one relays, every tick.
+        team[1].cfg.relayers = 6;
+        assert!((0..100).all(|t| team[1].relays(t)));
     }
 
     #[test]
