@@ -152,8 +152,6 @@ pub fn decide_sorted(ballots: &[Ballot<'_>], rule: Rule) -> Vec<TeamStep> {
 /// instead of n decisions.
 pub fn agreement_with_the_others(ballots: &[Ballot<'_>], rule: Rule) -> Vec<(usize, usize)> {
     let n = ballots.len();
-    // The longest ballot of the others of ballot i: how many steps they decide.
-    let theirs_len = |i: usize| ballots.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, o)| o.steps.len()).max();
     match rule {
         Rule::Paper(_) => {
             // The paper's weights are shares of the voters counted: decide without each.
@@ -170,6 +168,9 @@ pub fn agreement_with_the_others(ballots: &[Ballot<'_>], rule: Rule) -> Vec<(usi
         }
         Rule::Trust => {
             let steps = ballots.iter().map(|b| b.steps.len()).max().unwrap_or(0);
+            // The longest ballot of the others of ballot i: how many steps they decide.
+            let theirs_len =
+                |i: usize| ballots.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, o)| o.steps.len()).max();
             // raw[h * n + j]: ballot j's weight at step h (0 where it has no step h)
             let raw: Vec<f32> = (0..steps)
                 .flat_map(|h| ballots.iter().map(move |b| if h < b.steps.len() { trust_weight(b, h) } else { 0.0 }))
