@@ -209,27 +209,37 @@ fn agreement(b: &Ballot<'_>, theirs: impl Iterator<Item = Station>) -> (usize, u
 /// and every build. Two robots that name the same digest for a tick decided on the
 /// same ballots.
 pub fn digest(ballots: &[Ballot<'_>]) -> u64 {
-    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-    const PRIME: u64 = 0x0100_0000_01b3;
-    let mut h = OFFSET;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h = (h ^ u64::from(b)).wrapping_mul(PRIME);
-        }
-    };
+    let mut h = Fnv1a::default();
     for b in ballots {
-        eat(b.robot.as_str().as_bytes());
-        eat(&[0xff]); // ids hold no 0xff byte: the id ends here
-        eat(&b.visibility.to_le_bytes());
-        eat(&b.trust.to_bits().to_le_bytes());
-        eat(&b.quality.to_bits().to_le_bytes());
-        eat(&(b.steps.len() as u32).to_le_bytes());
+        h.eat(b.robot.as_str().as_bytes());
+        h.eat(&[0xff]); // ids hold no 0xff byte: the id ends here
+        h.eat(&b.visibility.to_le_bytes());
+        h.eat(&b.trust.to_bits().to_le_bytes());
+        h.eat(&b.quality.to_bits().to_le_bytes());
+        h.eat(&(b.steps.len() as u32).to_le_bytes());
         for s in b.steps {
-            eat(&[s.class.into()]);
-            eat(&s.confidence.to_bits().to_le_bytes());
+            h.eat(&[s.class.into()]);
+            h.eat(&s.confidence.to_bits().to_le_bytes());
         }
     }
-    h
+    h.0
+}
+
+/// FNV-1a, 64 bits: a hash that is the same on every robot and every build.
+pub(crate) struct Fnv1a(pub u64);
+
+impl Default for Fnv1a {
+    fn default() -> Self {
+        Fnv1a(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv1a {
+    pub fn eat(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
 }
 
 #[cfg(test)]

@@ -241,10 +241,10 @@ impl Verdict {
 /// two, then a 64-bit finaliser (splitmix64's) so that every bit of the tick moves the
 /// order.
 fn relay_rank(tick: u64, robot: &RobotId) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in tick.to_le_bytes().iter().chain(robot.as_str().as_bytes()) {
-        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-    }
+    let mut fnv = consensus::Fnv1a::default();
+    fnv.eat(&tick.to_le_bytes());
+    fnv.eat(robot.as_str().as_bytes());
+    let mut h = fnv.0;
     h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     h ^ (h >> 31)
@@ -747,11 +747,11 @@ impl Engine {
     /// Publishes the ballots we hold for tick `t`, once, if we are one of its relayers
     /// (nothing when we hold none).
     fn relay(&mut self, t: u64, out: &mut Vec<Output>) {
-        let relays = self.relays(t);
-        let tick = self.open.get_mut(&t).expect("open");
-        if tick.relayed {
+        if self.open[&t].relayed {
             return;
         }
+        let relays = self.relays(t);
+        let tick = self.open.get_mut(&t).expect("open");
         tick.relayed = true;
         if relays && !tick.votes.is_empty() {
             out.push(Output::Ballots(BallotsMsg {
@@ -772,13 +772,9 @@ impl Engine {
     /// more. The members counted are ours and the peers we wait for; two robots that
     /// count differently for a moment only change how many relay.
     fn relays(&self, t: u64) -> bool {
-        let k = self.cfg.relayers;
-        if self.live.len() < k {
-            return true; // no more members than relayers, ourselves included
-        }
         let mine = (relay_rank(t, &self.cfg.robot), &self.cfg.robot);
         let ahead = self.live.intersection(&self.active).filter(|r| (relay_rank(t, r), *r) < mine).count();
-        ahead < k
+        ahead < self.cfg.relayers
     }
 
     fn decide(&mut self, t: u64, by: DecidedBy, now: Duration, out: &mut Vec<Output>) {
