@@ -152,6 +152,12 @@ fn bench_codec() {
         landmarks: Station::ALL
             .map(|s| Landmark { station: s, position: [s.index() as f32, 2.0], sigma: 0.4 })
             .to_vec(),
+        verdict: Some(Verdict {
+            tick: 6,
+            class: Some(Station::Assembly),
+            voters: (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect(),
+            digest: 0x5eed,
+        }),
     };
     let v = VoteMsg {
         robot: f.robot.clone(),

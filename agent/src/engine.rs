@@ -24,8 +24,11 @@
 //!
 //! The decision is a deterministic function of the ballots held, so robots that hold
 //! the same ballots decide the same; relaying each robot's ballots partway through the
-//! tick is what makes them hold the same ballots when links lose messages. Comparing
-//! digests with peers' decisions shows, per robot, when it decided on fewer ballots.
+//! tick is what makes them hold the same ballots when links lose messages. Each robot's
+//! next embedding carries its latest decision in brief ([`Verdict`]): comparing class
+//! and digest with ours measures how often the team agrees and shows, per robot, when
+//! it decided on fewer ballots, without any robot hearing every peer's decisions (the
+//! decisions still go out, for observers: n − 1 fewer messages into each robot a tick).
 //!
 //! Each tick also teaches the robot whom to trust ([`crate::trust`]): every voter is
 //! judged against the decision the others reach without it, and every robot's estimate
@@ -145,8 +148,6 @@ pub enum Input {
     Vote(VoteMsg),
     /// The ballots a peer holds for a tick.
     Ballots(BallotsMsg),
-    /// A peer decision, compared with ours to measure agreement.
-    Decision(DecisionMsg),
     /// Where a member's map puts the stations (sent when a robot joins).
     Map(MapMsg),
     MemberJoined(RobotId),
@@ -202,8 +203,8 @@ struct Tick {
     votes: BTreeMap<RobotId, VoteMsg>,
     /// We published the ballots we hold for the tick.
     relayed: bool,
-    /// Peers' decisions that arrived before ours.
-    peer_decisions: Vec<Verdict>,
+    /// Peers' verdicts that arrived before our decision.
+    peer_verdicts: Vec<Verdict>,
 }
 
 impl Tick {
@@ -217,23 +218,8 @@ impl Tick {
             abstaining: BTreeSet::new(),
             votes: BTreeMap::new(),
             relayed: false,
-            peer_decisions: Vec::new(),
+            peer_verdicts: Vec::new(),
         }
-    }
-}
-
-/// What a decision was made of: enough to compare two robots' decisions of a tick.
-#[derive(Debug, Clone)]
-struct Verdict {
-    class: Option<Station>,
-    /// Sorted.
-    voters: Vec<RobotId>,
-    digest: u64,
-}
-
-impl Verdict {
-    fn of(d: &DecisionMsg) -> Verdict {
-        Verdict { class: d.steps.first().map(|s| s.class), voters: d.voters.clone(), digest: d.digest }
     }
 }
 
@@ -280,6 +266,8 @@ pub struct Engine {
     /// Instance ids of other daemons seen using our robot id.
     duplicates: BTreeSet<u64>,
     last_decision: Option<DecisionMsg>,
+    /// Our latest verdict, until our next embedding message carries it.
+    unshared_verdict: Option<Verdict>,
     /// The GCN's spatial-only logits for our latest frame that showed the worker.
     last_spatial: Option<(u64, [f32; NUM_CLASSES])>,
 }
@@ -328,6 +316,7 @@ impl Engine {
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
             last_decision: None,
+            unshared_verdict: None,
             last_spatial: None,
         }
     }
@@ -414,7 +403,6 @@ impl Engine {
                 }
             }
             Input::Ballots(b) => self.on_ballots(b, now, &mut out),
-            Input::Decision(d) => self.compare(&d),
             Input::Map(m) => {
                 // A peer's map fills in the stations ours lacks (floor/stations.rs);
                 // not from a peer whose feed is stale or whom we doubt.
@@ -515,6 +503,7 @@ impl Engine {
             worker,
             facing,
             landmarks,
+            verdict: self.unshared_verdict.take(),
         }));
         let tick = self.open_tick(f.tick, now);
         tick.own = Some(Own {
@@ -531,10 +520,13 @@ impl Engine {
         self.advance(f.tick, now, out);
     }
 
-    fn on_embedding(&mut self, e: EmbeddingMsg, now: Duration, out: &mut Vec<Output>) {
+    fn on_embedding(&mut self, mut e: EmbeddingMsg, now: Duration, out: &mut Vec<Output>) {
         let from_peer = e.robot != self.cfg.robot;
         if from_peer {
             self.peer_feeds.entry(e.robot.clone()).or_default().see(e.embedding.clone());
+            if let Some(theirs) = e.verdict.take() {
+                self.compare(theirs);
+            }
         }
         let stale = self.peer_is_stale(&e.robot);
         if stale {
@@ -809,9 +801,10 @@ impl Engine {
             digest,
         };
         let ours = Verdict::of(&d);
-        for theirs in &tick.peer_decisions {
-            self.record_agreement(&ours, theirs);
+        for theirs in &tick.peer_verdicts {
+            record_agreement(&mut self.metrics, &ours, theirs);
         }
+        self.unshared_verdict = Some(ours.clone());
         self.decided.insert(t, ours);
         while self.decided.len() as u64 > DECIDED_MEMORY {
             self.decided.pop_first();
@@ -820,32 +813,25 @@ impl Engine {
         out.push(Output::Decision(d));
     }
 
-    fn compare(&mut self, d: &DecisionMsg) {
-        if d.robot == self.cfg.robot {
-            if d.instance != self.cfg.instance {
-                self.metrics.duplicate_id_messages += 1;
-                self.duplicates.insert(d.instance);
-            }
-            return;
-        }
-        let theirs = Verdict::of(d);
-        if let Some(ours) = self.decided.get(&d.tick).cloned() {
-            self.record_agreement(&ours, &theirs);
-        } else if let Some(tick) = self.open.get_mut(&d.tick) {
-            tick.peer_decisions.push(theirs);
+    /// A peer's verdict against ours for its tick, now or when we decide it.
+    fn compare(&mut self, theirs: Verdict) {
+        if let Some(ours) = self.decided.get(&theirs.tick) {
+            record_agreement(&mut self.metrics, ours, &theirs);
+        } else if let Some(tick) = self.open.get_mut(&theirs.tick) {
+            tick.peer_verdicts.push(theirs);
         }
     }
+}
 
-    fn record_agreement(&mut self, ours: &Verdict, theirs: &Verdict) {
-        let m = &mut self.metrics;
-        m.agreement_compared += 1;
-        m.agreement_same += u64::from(ours.class == theirs.class);
-        if ours.digest != theirs.digest {
-            m.ballot_sets_differ += 1;
-            let theirs_has_ours = ours.voters.iter().all(|v| theirs.voters.binary_search(v).is_ok());
-            if theirs_has_ours && theirs.voters.len() > ours.voters.len() {
-                m.decided_on_fewer_ballots += 1;
-            }
+/// Counts one comparison of our verdict of a tick with a peer's.
+fn record_agreement(m: &mut Metrics, ours: &Verdict, theirs: &Verdict) {
+    m.agreement_compared += 1;
+    m.agreement_same += u64::from(ours.class == theirs.class);
+    if ours.digest != theirs.digest {
+        m.ballot_sets_differ += 1;
+        let theirs_has_ours = ours.voters.iter().all(|v| theirs.voters.binary_search(v).is_ok());
+        if theirs_has_ours && theirs.voters.len() > ours.voters.len() {
+            m.decided_on_fewer_ballots += 1;
         }
     }
 }
@@ -935,6 +921,7 @@ pub(crate) mod tests {
             worker,
             facing: None,
             landmarks: Vec::new(),
+            verdict: None,
         }
     }
 
@@ -1024,6 +1011,7 @@ pub(crate) mod tests {
                 worker: None,
                 facing: None,
                 landmarks: vec![],
+                verdict: None,
             }),
             ms(1),
         );
@@ -1057,6 +1045,7 @@ pub(crate) mod tests {
                     worker: None,
                     facing: None,
                     landmarks: vec![],
+                    verdict: None,
                 }),
                 ms(0),
             );
@@ -1074,6 +1063,7 @@ pub(crate) mod tests {
                 worker: None,
                 facing: None,
                 landmarks: vec![],
+                verdict: None,
             }),
             ms(101),
         );
@@ -1145,6 +1135,7 @@ pub(crate) mod tests {
             worker: None,
             facing: None,
             landmarks: vec![Landmark { station: Station::Manufacturing, position: [9.0, 9.0], sigma: 0.3 }; 3],
+            verdict: None,
         };
         a.handle(Input::Embedding(peer), ms(401));
         assert!(
@@ -1286,19 +1277,6 @@ pub(crate) mod tests {
         e
     }
 
-    /// What one robot's outputs become at a peer: its inputs.
-    fn as_inputs(out: &[Output]) -> Vec<Input> {
-        out.iter()
-            .map(|o| match o.clone() {
-                Output::Embedding(m) => Input::Embedding(m),
-                Output::Vote(m) => Input::Vote(m),
-                Output::Ballots(m) => Input::Ballots(m),
-                Output::Decision(m) => Input::Decision(m),
-                Output::Map(m) => Input::Map(m),
-            })
-            .collect()
-    }
-
     /// Three robots that know each other, each having heard from the others.
     fn team_of_three(set: &Arc<ModelSet>, relay_after: Option<Duration>) -> Vec<Engine> {
         let mut team: Vec<Engine> = ["a", "b", "c"].iter().map(|r| relaying(r, set, relay_after)).collect();
@@ -1310,12 +1288,10 @@ pub(crate) mod tests {
         }
         let warm: Vec<Vec<Output>> =
             (0..3).map(|i| team[i].handle(Input::Frame(frame(["a", "b", "c"][i], 1, false)), ms(0))).collect();
-        // Each hears the others' embeddings (their decisions are left out: nothing compared yet).
+        // Each hears the others' embeddings.
         for (i, out) in warm.iter().enumerate() {
             for j in (0..3).filter(|&j| j != i) {
-                for input in as_inputs(out).into_iter().filter(|i| matches!(i, Input::Embedding(_))) {
-                    team[j].handle(input, ms(1));
-                }
+                team[j].handle(Input::Embedding(take_embedding(out)), ms(1));
             }
         }
         team
@@ -1363,15 +1339,19 @@ pub(crate) mod tests {
         assert_eq!((db[0].digest, &db[0].steps), (da[0].digest, &da[0].steps));
         assert_eq!(dc[0].digest, da[0].digest);
         assert_eq!(team[1].metrics.relayed_ballots_used, 1);
-        // Peers' decisions name the same digest: nothing counted as differing.
-        team[1].handle(Input::Decision(da[0].clone()), ms(216));
-        assert_eq!((team[1].metrics.agreement_compared, team[1].metrics.ballot_sets_differ), (1, 0));
         // A relay for a decided tick is counted, never applied.
         let mut late = relay.clone();
         late.votes.push(VoteMsg { robot: id("d"), ..late.votes[0].clone() });
         let out = team[1].handle(Input::Ballots(late), ms(230));
         assert!(out.is_empty());
         assert_eq!(team[1].metrics.late_relayed_ballots, 1, "d's vote arrived after b decided without it");
+        // a's next embedding carries its verdict: the same digest, nothing counted as differing.
+        let compared = team[1].metrics.agreement_compared;
+        let next = take_embedding(&team[0].handle(Input::Frame(frame("a", 3, false)), ms(300)));
+        assert_eq!(next.verdict, Some(Verdict::of(da[0])));
+        team[1].handle(Input::Embedding(next), ms(301));
+        let m = &team[1].metrics;
+        assert_eq!((m.agreement_compared, m.agreement_same, m.ballot_sets_differ), (compared + 1, compared + 1, 0));
     }
 
     #[test]
@@ -1380,14 +1360,28 @@ pub(crate) mod tests {
         let mut team = team_of_three(&set, None);
         let outs = tick_losing_a_vote_to_b(&mut team, 2);
         assert!(outs.iter().flatten().all(|o| !matches!(o, Output::Ballots(_))), "relaying is off");
+        // c's next embedding, carrying its verdict of tick 2 (all three ballots), reaches b
+        // while b still waits for a's vote: it is compared once b decides.
+        let from_c = take_embedding(&team[2].handle(Input::Frame(frame("c", 3, false)), ms(250)));
+        assert_eq!(from_c.verdict.as_ref().map(|v| (v.tick, v.voters.len())), Some((2, 3)));
+        let compared = team[1].metrics.agreement_compared;
+        team[1].handle(Input::Embedding(from_c), ms(251));
+        assert_eq!(team[1].metrics.agreement_compared, compared, "b has not decided tick 2");
         let ob = team[1].handle(Input::Poll, ms(260));
         let db = decisions(&ob);
         assert_eq!((db.len(), db[0].decided_by, db[0].voters.len()), (1, DecidedBy::Deadline, 2));
+        let m = &team[1].metrics;
+        assert_eq!((m.agreement_compared, m.ballot_sets_differ, m.decided_on_fewer_ballots), (compared + 1, 1, 1));
+        // a's verdict comes after b decided: compared at once. a shares it once.
         let da = decisions(&outs[0])[0].clone();
         assert_ne!(da.digest, db[0].digest);
-        team[1].handle(Input::Decision(da), ms(261));
+        let from_a = take_embedding(&team[0].handle(Input::Frame(frame("a", 3, false)), ms(300)));
+        assert_eq!(from_a.verdict, Some(Verdict::of(&da)));
+        team[1].handle(Input::Embedding(from_a), ms(301));
         let m = &team[1].metrics;
-        assert_eq!((m.ballot_sets_differ, m.decided_on_fewer_ballots), (1, 1));
+        assert_eq!((m.agreement_compared, m.ballot_sets_differ, m.decided_on_fewer_ballots), (compared + 2, 2, 2));
+        let again = take_embedding(&team[0].handle(Input::Frame(frame("a", 4, false)), ms(400)));
+        assert_eq!(again.verdict, None, "a decided nothing since: nothing to share");
     }
 
     #[test]

@@ -142,7 +142,8 @@ pub struct Metrics {
     pub evicted_ticks: u64,
     /// Model runs that failed (the tick goes on without this robot's vote).
     pub model_errors: u64,
-    /// Peer decisions compared with ours, and how many were the same.
+    /// Peer decisions (the verdicts their embeddings carry) compared with ours, and
+    /// how many were the same.
     pub agreement_compared: u64,
     pub agreement_same: u64,
     /// Peer decisions that counted other ballots than ours (their digest differs).

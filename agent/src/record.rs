@@ -11,10 +11,10 @@
 //! | topic | payload |
 //! |---|---|
 //! | `/spwi/config` | the engine configuration and model set name (JSON, once) |
-//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/vote`, `/spwi/in/ballots`, `/spwi/in/decision` | a received message |
+//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/vote`, `/spwi/in/ballots`, `/spwi/in/map` | a received message |
 //! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (JSON) |
 //! | `/spwi/in/poll` | empty: time passed |
-//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision` | a published message |
+//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map` | a published message |
 //! | `/spwi/state` | after each decision, whom the robot trusts and whose feed it sets aside ([`PeerState`], JSON) |
 //!
 //! Log and publish times are nanoseconds of engine time (since the daemon started).
@@ -88,7 +88,6 @@ enum Channel {
     InEmbedding,
     InVote,
     InBallots,
-    InDecision,
     InMap,
     InMembership,
     InPoll,
@@ -101,13 +100,12 @@ enum Channel {
 }
 
 impl Channel {
-    const ALL: [Channel; 15] = [
+    const ALL: [Channel; 14] = [
         Channel::Config,
         Channel::InDetections,
         Channel::InEmbedding,
         Channel::InVote,
         Channel::InBallots,
-        Channel::InDecision,
         Channel::InMap,
         Channel::InMembership,
         Channel::InPoll,
@@ -126,7 +124,6 @@ impl Channel {
             Channel::InEmbedding => "/spwi/in/embedding",
             Channel::InVote => "/spwi/in/vote",
             Channel::InBallots => "/spwi/in/ballots",
-            Channel::InDecision => "/spwi/in/decision",
             Channel::InMap => "/spwi/in/map",
             Channel::InMembership => "/spwi/in/membership",
             Channel::InPoll => "/spwi/in/poll",
@@ -187,7 +184,6 @@ impl Recorder {
             Input::Embedding(m) => self.write(Channel::InEmbedding, now, &encode(m)),
             Input::Vote(m) => self.write(Channel::InVote, now, &encode(m)),
             Input::Ballots(m) => self.write(Channel::InBallots, now, &encode(m)),
-            Input::Decision(m) => self.write(Channel::InDecision, now, &encode(m)),
             Input::Map(m) => self.write(Channel::InMap, now, &encode(m)),
             Input::MemberJoined(r) | Input::MemberLeft(r) => {
                 let alive = matches!(input, Input::MemberJoined(_));
@@ -253,7 +249,6 @@ pub fn read(path: &Path) -> Result<Recording> {
             Some(Channel::InEmbedding) => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
             Some(Channel::InVote) => inputs.push((now, Input::Vote(decode(d).with_context(ctx)?))),
             Some(Channel::InBallots) => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
-            Some(Channel::InDecision) => inputs.push((now, Input::Decision(decode(d).with_context(ctx)?))),
             Some(Channel::InMap) => inputs.push((now, Input::Map(decode(d).with_context(ctx)?))),
             Some(Channel::InMembership) => {
                 let r: MembershipRecord = serde_json::from_slice(d).with_context(ctx)?;

@@ -14,8 +14,9 @@ use serde::Serialize;
 /// Bumped on every incompatible change of any payload (2: robot pose in the detection
 /// frame, worker estimate and landmarks in the embedding message; 3: relayed ballots,
 /// the ballot digest in the decision; 4: the voter's standing and view quality in the
-/// vote; 5: the voter's signature; 6: the worker's facing in the embedding message).
-pub const PROTOCOL_VERSION: u16 = 6;
+/// vote; 5: the voter's signature; 6: the worker's facing in the embedding message;
+/// 7: the robot's latest verdict in the embedding message).
+pub const PROTOCOL_VERSION: u16 = 7;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -219,11 +220,61 @@ mod tests {
             worker: None,
             facing: Some(-2.5),
             landmarks: Vec::new(),
+            verdict: None,
         };
         assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
         now.facing = Some(f32::NAN);
         let e = decode::<EmbeddingMsg>(&encode(&now)).unwrap_err().to_string();
         assert!(e.contains("field `facing`") && e.contains("NaN"), "{e}");
+    }
+
+    #[test]
+    fn a_version_6_embedding_without_the_verdict_is_refused_and_a_verdict_names_its_voters_in_order() {
+        #[derive(serde::Serialize)]
+        struct EmbeddingV6 {
+            robot: RobotId,
+            instance: u64,
+            tick: u64,
+            embedding: Option<Vec<f32>>,
+            visibility: u32,
+            votes: bool,
+            worker: Option<WorkerEstimate>,
+            facing: Option<f32>,
+            landmarks: Vec<Landmark>,
+        }
+        let r = |s: &str| RobotId::new(s).unwrap();
+        let old = EmbeddingV6 {
+            robot: r("r1"),
+            instance: 1,
+            tick: 9,
+            embedding: None,
+            visibility: 3,
+            votes: false,
+            worker: None,
+            facing: None,
+            landmarks: Vec::new(),
+        };
+        let b = bincode::serde::encode_to_vec((6u16, old), CONFIG).unwrap();
+        assert!(matches!(decode::<EmbeddingMsg>(&b), Err(DecodeError::UnknownVersion { got: 6, .. })));
+        let verdict = Verdict { tick: 8, class: Some(Station::Assembly), voters: vec![r("r1"), r("r2")], digest: 77 };
+        let mut now = EmbeddingMsg {
+            robot: r("r1"),
+            instance: 1,
+            tick: 9,
+            embedding: None,
+            visibility: 3,
+            votes: true,
+            worker: None,
+            facing: None,
+            landmarks: Vec::new(),
+            verdict: Some(verdict.clone()),
+        };
+        assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
+        for voters in [vec![r("r2"), r("r1")], vec![r("r1"), r("r1")]] {
+            now.verdict = Some(Verdict { voters, ..verdict.clone() });
+            let e = decode::<EmbeddingMsg>(&encode(&now)).unwrap_err().to_string();
+            assert!(e.contains("field `verdict.voters`") && e.contains("must be sorted, each once"), "{e}");
+        }
     }
 
     #[test]

@@ -275,7 +275,9 @@ impl Validate for MapMsg {
 /// of a robot that will not. `worker`, `facing` and `landmarks` are
 /// what the robot knows in the floor frame (empty when it is not localised): the
 /// team fuses them into one worker track, one facing of the worker's body and one
-/// map of the stations.
+/// map of the stations. `verdict` is the robot's latest decision not shared before,
+/// in brief: peers measure how often the team agrees from it, so that no robot need
+/// hear every other robot's decision messages.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EmbeddingMsg {
     pub robot: RobotId,
@@ -291,6 +293,7 @@ pub struct EmbeddingMsg {
     /// the shoulders or hips, or the robot is not localised.
     pub facing: Option<f32>,
     pub landmarks: Vec<Landmark>,
+    pub verdict: Option<Verdict>,
 }
 
 impl Validate for EmbeddingMsg {
@@ -313,8 +316,39 @@ impl Validate for EmbeddingMsg {
                 return Err(invalid("landmarks.sigma", format!("{} must be a positive number", l.sigma)));
             }
         }
+        if let Some(v) = &self.verdict {
+            sorted_voters("verdict.voters", &v.voters)?;
+        }
         Ok(())
     }
+}
+
+/// What a robot decided for one tick, enough to compare two robots' decisions: the
+/// class at t (`None`: no member saw the worker), whose ballots were counted, and
+/// their digest ([`DecisionMsg::digest`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Verdict {
+    pub tick: u64,
+    pub class: Option<Station>,
+    /// Sorted, each member once.
+    pub voters: Vec<RobotId>,
+    pub digest: u64,
+}
+
+impl Verdict {
+    pub fn of(d: &DecisionMsg) -> Verdict {
+        Verdict { tick: d.tick, class: d.steps.first().map(|s| s.class), voters: d.voters.clone(), digest: d.digest }
+    }
+}
+
+fn sorted_voters(field: &'static str, voters: &[RobotId]) -> Result<(), Invalid> {
+    if voters.len() > MAX_MEMBERS {
+        return Err(invalid(field, format!("{} voters, at most {MAX_MEMBERS}", voters.len())));
+    }
+    if let Some(w) = voters.windows(2).find(|w| w[0] >= w[1]) {
+        return Err(invalid(field, format!("{} before {}: must be sorted, each once", w[0], w[1])));
+    }
+    Ok(())
 }
 
 /// The predicted class and its calibrated confidence for one step.
@@ -416,10 +450,7 @@ impl Validate for DecisionMsg {
         for s in &self.steps {
             finite("steps.score", &[s.score])?;
         }
-        if self.voters.len() > MAX_MEMBERS {
-            return Err(invalid("voters", format!("{} voters, at most {MAX_MEMBERS}", self.voters.len())));
-        }
-        Ok(())
+        sorted_voters("voters", &self.voters)
     }
 }
 

@@ -71,10 +71,12 @@ proptest! {
                              e in prop::option::of(prop::collection::vec(finite(), EMBEDDING_DIM)), visibility in any::<u32>(),
                              worker in prop::option::of((finite(), finite(), finite(), finite(), 0.01f32..10.0, -0.5f32..0.5, 1.0f32..10.0)),
                              facing in prop::option::of(finite()),
-                             landmarks in prop::collection::vec((station(), finite(), finite(), 0.01f32..5.0), 0..8)) {
+                             landmarks in prop::collection::vec((station(), finite(), finite(), 0.01f32..5.0), 0..8),
+                             verdict in prop::option::of((any::<u64>(), prop::option::of(station()), prop::collection::btree_set(robot(), 0..10), any::<u64>()))) {
         let worker = worker.map(|(x, y, vx, vy, pp, pv, vv)| WorkerEstimate { position: [x, y], velocity: [vx, vy], covariance: [pp, pv * pp.sqrt(), vv] });
         let landmarks = landmarks.into_iter().map(|(station, x, y, sigma)| Landmark { station, position: [x, y], sigma }).collect();
-        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, votes: visibility % 2 == 0, worker, facing, landmarks };
+        let verdict = verdict.map(|(tick, class, voters, digest)| Verdict { tick, class, voters: voters.into_iter().collect(), digest });
+        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, votes: visibility % 2 == 0, worker, facing, landmarks, verdict };
         prop_assert_eq!(decode::<EmbeddingMsg>(&encode(&m)).unwrap(), m);
     }
 
@@ -86,8 +88,9 @@ proptest! {
     }
 
     #[test]
-    fn decisions_round_trip(robot in robot(), tick in any::<u64>(), voters in prop::collection::vec(robot(), 0..10),
+    fn decisions_round_trip(robot in robot(), tick in any::<u64>(), voters in prop::collection::btree_set(robot(), 0..10),
                             steps in prop::collection::vec((station(), finite()).prop_map(|(class, score)| TeamStep { class, score }), 0..30)) {
+        let voters = voters.into_iter().collect();
         let m = DecisionMsg { robot, instance: 1, tick, steps, voters, live_members: 3, decided_by: DecidedBy::Deadline, digest: tick.rotate_left(7) };
         prop_assert_eq!(decode::<DecisionMsg>(&encode(&m)).unwrap(), m);
     }

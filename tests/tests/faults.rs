@@ -109,6 +109,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             worker: None,
             facing: None,
             landmarks: vec![],
+            verdict: None,
         });
         let spoofed = encode(&VoteMsg { robot: id("mallory"), ..good_vote.clone() });
         let bads: Vec<(&str, Vec<u8>)> = vec![

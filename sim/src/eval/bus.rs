@@ -127,7 +127,8 @@ impl Bus {
             Output::Embedding(e) => Input::Embedding(e.clone()),
             Output::Vote(v) => Input::Vote(v.clone()),
             Output::Ballots(b) => Input::Ballots(b.clone()),
-            Output::Decision(d) => Input::Decision(d.clone()),
+            // Robots read no decisions (peers' verdicts come in their embeddings).
+            Output::Decision(_) => return,
             Output::Map(m) => Input::Map(m.clone()),
         };
         for to in 0..self.engines.len() {
