@@ -185,32 +185,9 @@ mod tests {
         assert!(e.to_string().contains("protocol version 1"), "{e}");
     }
 
-    #[test]
-    fn a_version_5_embedding_without_the_facing_is_refused_and_a_facing_must_be_finite() {
-        #[derive(serde::Serialize)]
-        struct EmbeddingV5 {
-            robot: RobotId,
-            instance: u64,
-            tick: u64,
-            embedding: Option<Vec<f32>>,
-            visibility: u32,
-            votes: bool,
-            worker: Option<WorkerEstimate>,
-            landmarks: Vec<Landmark>,
-        }
-        let old = EmbeddingV5 {
-            robot: RobotId::new("r1").unwrap(),
-            instance: 1,
-            tick: 9,
-            embedding: None,
-            visibility: 3,
-            votes: false,
-            worker: None,
-            landmarks: Vec::new(),
-        };
-        let b = bincode::serde::encode_to_vec((5u16, old), CONFIG).unwrap();
-        assert!(matches!(decode::<EmbeddingMsg>(&b), Err(DecodeError::UnknownVersion { got: 5, .. })));
-        let mut now = EmbeddingMsg {
+    /// A current embedding message of robot r1 for tick 9, with nothing in it.
+    fn embedding() -> EmbeddingMsg {
+        EmbeddingMsg {
             robot: RobotId::new("r1").unwrap(),
             instance: 1,
             tick: 9,
@@ -218,10 +195,15 @@ mod tests {
             visibility: 3,
             votes: true,
             worker: None,
-            facing: Some(-2.5),
+            facing: None,
             landmarks: Vec::new(),
             verdict: None,
-        };
+        }
+    }
+
+    #[test]
+    fn a_facing_must_be_finite() {
+        let mut now = EmbeddingMsg { facing: Some(-2.5), ..embedding() };
         assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
         now.facing = Some(f32::NAN);
         let e = decode::<EmbeddingMsg>(&encode(&now)).unwrap_err().to_string();
@@ -257,18 +239,7 @@ mod tests {
         let b = bincode::serde::encode_to_vec((6u16, old), CONFIG).unwrap();
         assert!(matches!(decode::<EmbeddingMsg>(&b), Err(DecodeError::UnknownVersion { got: 6, .. })));
         let verdict = Verdict { tick: 8, class: Some(Station::Assembly), voters: vec![r("r1"), r("r2")], digest: 77 };
-        let mut now = EmbeddingMsg {
-            robot: r("r1"),
-            instance: 1,
-            tick: 9,
-            embedding: None,
-            visibility: 3,
-            votes: true,
-            worker: None,
-            facing: None,
-            landmarks: Vec::new(),
-            verdict: Some(verdict.clone()),
-        };
+        let mut now = EmbeddingMsg { verdict: Some(verdict.clone()), ..embedding() };
         assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
         for voters in [vec![r("r2"), r("r1")], vec![r("r1"), r("r1")]] {
             now.verdict = Some(Verdict { voters, ..verdict.clone() });
