@@ -203,8 +203,8 @@ struct Tick {
     votes: BTreeMap<RobotId, VoteMsg>,
     /// We published the ballots we hold for the tick.
     relayed: bool,
-    /// Peers' verdicts that arrived before our decision.
-    peer_verdicts: Vec<Verdict>,
+    /// Peers' verdicts that arrived before our decision, one per peer.
+    peer_verdicts: BTreeMap<RobotId, Verdict>,
 }
 
 impl Tick {
@@ -218,7 +218,7 @@ impl Tick {
             abstaining: BTreeSet::new(),
             votes: BTreeMap::new(),
             relayed: false,
-            peer_verdicts: Vec::new(),
+            peer_verdicts: BTreeMap::new(),
         }
     }
 }
@@ -525,7 +525,7 @@ impl Engine {
         if from_peer {
             self.peer_feeds.entry(e.robot.clone()).or_default().see(e.embedding.clone());
             if let Some(theirs) = e.verdict.take() {
-                self.compare(theirs);
+                self.compare(&e.robot, theirs);
             }
         }
         let stale = self.peer_is_stale(&e.robot);
@@ -801,7 +801,7 @@ impl Engine {
             digest,
         };
         let ours = Verdict::of(&d);
-        for theirs in &tick.peer_verdicts {
+        for theirs in tick.peer_verdicts.values() {
             record_agreement(&mut self.metrics, &ours, theirs);
         }
         self.unshared_verdict = Some(ours.clone());
@@ -814,11 +814,11 @@ impl Engine {
     }
 
     /// A peer's verdict against ours for its tick, now or when we decide it.
-    fn compare(&mut self, theirs: Verdict) {
+    fn compare(&mut self, peer: &RobotId, theirs: Verdict) {
         if let Some(ours) = self.decided.get(&theirs.tick) {
             record_agreement(&mut self.metrics, ours, &theirs);
         } else if let Some(tick) = self.open.get_mut(&theirs.tick) {
-            tick.peer_verdicts.push(theirs);
+            tick.peer_verdicts.insert(peer.clone(), theirs);
         }
     }
 }
