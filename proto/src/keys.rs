@@ -5,7 +5,7 @@
 //! | `spwi/<fleet>/robot/<robot>/detections`  | [`DetectionFrame`]              | world / detector node |
 //! | `spwi/<fleet>/robot/<robot>/embedding`   | [`EmbeddingMsg`]                | agent          |
 //! | `spwi/<fleet>/robot/<robot>/vote`        | [`VoteMsg`]                     | agent          |
-//! | `spwi/<fleet>/robot/<robot>/decision`    | [`DecisionMsg`] (for observers; robots read none) | agent |
+//! | `spwi/<fleet>/robot/<robot>/decision`    | [`DecisionMsg`] (for observers) | agent          |
 //! | `spwi/<fleet>/robot/<robot>/ballots`     | [`BallotsMsg`] (relayed votes)  | agent          |
 //! | `spwi/<fleet>/robot/<robot>/map`         | [`MapMsg`] (when a robot joins) | agent          |
 //! | `spwi/<fleet>/alive/<robot>`             | liveliness token (no payload)   | agent          |
