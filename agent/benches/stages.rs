@@ -112,7 +112,6 @@ fn bench_backend(backend: Backend) {
             robot: frame(0, 0).robot, // the engine takes only its own robot's frames
             instance: 1,
             temporal: TemporalModel::Collective,
-            embedding_wait: Duration::from_millis(30),
             decision_deadline: Duration::from_millis(60),
             consensus: Rule::Trust,
             trust: Default::default(),
@@ -140,13 +139,23 @@ fn bench_codec() {
     println!("\n== codec");
     let f = frame(7, 12);
     let fb = encode(&f);
+    let v = VoteMsg {
+        robot: f.robot.clone(),
+        instance: 1,
+        tick: 7,
+        steps: vec![StepVote { class: Station::Assembly, confidence: 0.7 }; 21],
+        visibility: 13,
+        trust: 0.9,
+        quality: 0.8,
+        signature: Vec::new(),
+    };
     let e = EmbeddingMsg {
         robot: f.robot.clone(),
         instance: 1,
         tick: 7,
         embedding: Some(vec![0.5; EMBEDDING_DIM]),
         visibility: 13,
-        votes: true,
+        vote: Some(v),
         worker: Some(WorkerEstimate { position: [3.0, 4.0], velocity: [1.0, 0.2], covariance: [0.05, 0.01, 0.2] }),
         facing: Some(1.2),
         landmarks: Station::ALL
@@ -159,16 +168,6 @@ fn bench_codec() {
             digest: 0x5eed,
         }),
     };
-    let v = VoteMsg {
-        robot: f.robot.clone(),
-        instance: 1,
-        tick: 7,
-        steps: vec![StepVote { class: Station::Assembly, confidence: 0.7 }; 21],
-        visibility: 13,
-        trust: 0.9,
-        quality: 0.8,
-        signature: Vec::new(),
-    };
     let d = DecisionMsg {
         robot: f.robot.clone(),
         instance: 1,
@@ -179,12 +178,11 @@ fn bench_codec() {
         decided_by: DecidedBy::AllVoted,
         digest: 0x5eed,
     };
-    let (eb, vb, db) = (encode(&e), encode(&v), encode(&d));
+    let (eb, db) = (encode(&e), encode(&d));
     println!(
-        "sizes: frame(12 objects) {} B, embedding {} B, vote {} B, decision {} B",
+        "sizes: frame(12 objects) {} B, embedding with its vote {} B, decision {} B",
         fb.len(),
         eb.len(),
-        vb.len(),
         db.len()
     );
     measure("encode frame (12 objects)", 5_000, || {
@@ -193,11 +191,8 @@ fn bench_codec() {
     measure("decode frame (12 objects)", 5_000, || {
         black_box(decode::<DetectionFrame>(black_box(&fb)).unwrap());
     });
-    measure("encode + decode embedding", 20_000, || {
+    measure("encode + decode embedding with its vote", 20_000, || {
         black_box(decode::<EmbeddingMsg>(&encode(black_box(&e))).unwrap());
-    });
-    measure("encode + decode vote", 20_000, || {
-        black_box(decode::<VoteMsg>(&encode(black_box(&v))).unwrap());
     });
     measure("encode + decode decision", 20_000, || {
         black_box(decode::<DecisionMsg>(&encode(black_box(&d))).unwrap());

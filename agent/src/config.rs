@@ -28,8 +28,6 @@ pub struct AgentConfig {
 pub struct TickConfig {
     /// Which GRU the robot runs.
     pub temporal: TemporalModel,
-    /// Wait at most this long for peers' embeddings before running the GRU (ms).
-    pub embedding_wait_ms: u64,
     /// Decide with the votes at hand this long after a tick starts (ms).
     pub decision_deadline_ms: u64,
     /// Relay the ballots held for a tick this long after it starts (ms; 0: never).
@@ -112,7 +110,6 @@ impl Default for TickConfig {
     fn default() -> Self {
         TickConfig {
             temporal: TemporalModel::Collective,
-            embedding_wait_ms: 30,
             decision_deadline_ms: 60,
             relay_ms: 40,
             relayers: 4,
@@ -203,13 +200,6 @@ impl AgentConfig {
         if !(1..=1000).contains(&t.decision_deadline_ms) {
             bail!("tick.decision_deadline_ms = {}: must be within 1..=1000 (a tick is 100 ms)", t.decision_deadline_ms);
         }
-        if !(1..=t.decision_deadline_ms).contains(&t.embedding_wait_ms) {
-            bail!(
-                "tick.embedding_wait_ms = {}: must be within 1..={} (tick.decision_deadline_ms)",
-                t.embedding_wait_ms,
-                t.decision_deadline_ms
-            );
-        }
         if t.relay_ms >= t.decision_deadline_ms {
             bail!(
                 "tick.relay_ms = {}: must be below tick.decision_deadline_ms ({}) for relays to arrive in time; 0 relays nothing",
@@ -261,7 +251,10 @@ mod tests {
         let cfg: AgentConfig = toml::from_str("[tick]\ntemporal = \"ego\"\ndecision_deadline_ms = 80\n").unwrap();
         assert_eq!(cfg.tick.temporal, TemporalModel::Ego);
         assert_eq!(cfg.tick.decision_deadline_ms, 80);
-        assert_eq!(cfg.tick.embedding_wait_ms, 30);
+        assert_eq!(cfg.tick.relay_ms, 40);
+        // Robots no longer wait for peers' embeddings before voting (protocol 8).
+        let e = toml::from_str::<AgentConfig>("[tick]\nembedding_wait_ms = 30\n").unwrap_err().to_string();
+        assert!(e.contains("unknown field `embedding_wait_ms`"), "{e}");
     }
 
     #[test]
@@ -276,9 +269,6 @@ mod tests {
         c.tick.decision_deadline_ms = 0;
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("tick.decision_deadline_ms") && e.contains("1..=1000"), "{e}");
-        let mut c = AgentConfig::default();
-        c.tick.embedding_wait_ms = 100;
-        assert!(c.validate().unwrap_err().to_string().contains("tick.embedding_wait_ms"));
         let mut c = AgentConfig::default();
         c.tick.alpha = Some(f32::NAN);
         assert!(c.validate().unwrap_err().to_string().contains("tick.alpha"));

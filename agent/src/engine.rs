@@ -6,14 +6,11 @@
 //! One tick, as this robot lives it:
 //!
 //! ```text
-//! frame ─► graph ─► GCN ─► Embedding out  (with the floor track and landmarks; says
-//!                                          whether this robot will vote for the tick)
-//!            peers' embeddings for the tick arrive
-//! all active peers' embeddings in, or embedding_wait passed
-//!       ─► window row ─► GRU ─► Vote out
+//! frame ─► graph ─► GCN ─► window row ─► GRU ─► Embedding out, our vote inside
 //!          (paper rows: own ‖ mean(peers) ‖ keypoints; relation rows: keypoints ‖
-//!           the worker's relations to the stations, from the team's fused track and map)
-//!            peers' votes arrive
+//!           the worker's relations to the stations, from the team's fused track and
+//!           map; what peers shared is read as the latest each of them sent)
+//!            peers' embedding messages arrive, each with its vote or none
 //! relay_after passed ─► Ballots out (every vote held for the tick, ours and peers';
 //!                      by the few members that relay this tick)
 //!            peers' relayed ballots fill in votes lost on our own links
@@ -21,6 +18,13 @@
 //!       ─► consensus ─► Decision out (naming a digest of the ballots counted)
 //!       ─► trust: each voter judged against the others
 //! ```
+//!
+//! One message a tick, not two: a robot votes as soon as its own frame is in, reading
+//! its peers' latest shares (their worker estimates predicted to this tick, their
+//! facings and embeddings, at most [`PEER_VIEW_TICKS`] old) instead of waiting for
+//! theirs of this tick. So each robot hears each peer once a tick, not once for the
+//! embedding and once more for the vote: half the messages every robot takes in, and
+//! one exchange instead of two before a tick can be decided (docs/BENCHMARKS.md).
 //!
 //! The decision is a deterministic function of the ballots held, so robots that hold
 //! the same ballots decide the same; relaying each robot's ballots partway through the
@@ -69,8 +73,6 @@ pub struct EngineConfig {
     /// Random per process: tells our own echoes from another daemon with our id.
     pub instance: u64,
     pub temporal: TemporalModel,
-    /// How long to wait for peers' embeddings before running the GRU without them.
-    pub embedding_wait: Duration,
     /// How long after a tick starts to decide with the votes at hand.
     pub decision_deadline: Duration,
     /// How votes become the decision.
@@ -113,7 +115,6 @@ impl EngineConfig {
             robot,
             instance,
             temporal: tick.temporal,
-            embedding_wait: Duration::from_millis(tick.embedding_wait_ms),
             decision_deadline: Duration::from_millis(tick.decision_deadline_ms),
             consensus: match tick.consensus {
                 ConsensusRule::Paper => Rule::Paper(Weights {
@@ -144,8 +145,8 @@ fn every_member() -> usize {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Input {
     Frame(DetectionFrame),
+    /// A peer's share of a tick, its vote inside.
     Embedding(EmbeddingMsg),
-    Vote(VoteMsg),
     /// The ballots a peer holds for a tick.
     Ballots(BallotsMsg),
     /// Where a member's map puts the stations (sent when a robot joins).
@@ -159,23 +160,36 @@ pub enum Input {
 /// What the robot publishes.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Output {
+    /// Our share of a tick, our vote inside.
     Embedding(EmbeddingMsg),
-    Vote(VoteMsg),
     Ballots(BallotsMsg),
     Decision(DecisionMsg),
     /// Our team map, for a robot that just joined.
     Map(MapMsg),
 }
 
-/// Our own part of a tick.
+/// How many ticks old a peer's share may be for our vote to read it (0.3 s): its
+/// worker estimate is predicted forward to our tick, its embedding and facing read
+/// as they are. The latest share of every peer is one tick old when our frame comes
+/// in; older ones stand in for a few lost messages.
+pub const PEER_VIEW_TICKS: u64 = 3;
+
+/// A peer's latest share, until a newer one arrives: what our vote reads of it.
 #[derive(Debug)]
-struct Own {
-    arrived: Duration,
+struct PeerView {
+    tick: u64,
+    /// `None` when it does not see the worker (or its feed is stale).
+    embedding: Option<Vec<f32>>,
+    worker: Option<WorkerEstimate>,
+    facing: Option<f32>,
+}
+
+/// What our own frame gave for a tick, until it is voted on.
+struct OwnView {
     visibility: u32,
     /// How well our frame shows the worker ([`vote::view_quality`]).
     quality: f32,
-    /// `None` when the worker was not seen (or the GCN failed). Both move into the
-    /// window at the vote step.
+    /// `None` when the worker was not seen (or the GCN failed).
     embedding: Option<Vec<f32>>,
     keypoints: Option<Vec<f32>>,
     /// Our own track's estimate of the worker for this tick.
@@ -184,21 +198,14 @@ struct Own {
     facing: Option<f32>,
     /// We vote for this tick: we see the worker, or (relation rows) we track it.
     will_vote: bool,
-    /// The vote step ran: the window row is in and, if `will_vote`, we voted.
-    vote_step_done: bool,
 }
 
 #[derive(Debug)]
 struct Tick {
     started: Duration,
-    own: Option<Own>,
-    /// Peers' embedding messages: `None` inside means "does not see the worker".
-    embeddings: BTreeMap<RobotId, Option<Vec<f32>>>,
-    /// Peers' estimates of the worker for the tick.
-    workers: BTreeMap<RobotId, WorkerEstimate>,
-    /// Where peers saw the worker's body facing in the tick.
-    facings: BTreeMap<RobotId, f32>,
-    /// Peers that said they will not vote for the tick.
+    /// When our own frame of the tick came in (and we voted, if we do).
+    own_frame: Option<Duration>,
+    /// Peers whose share of the tick carried no vote (or whose feed is stale).
     abstaining: BTreeSet<RobotId>,
     votes: BTreeMap<RobotId, VoteMsg>,
     /// We published the ballots we hold for the tick.
@@ -211,10 +218,7 @@ impl Tick {
     fn new(started: Duration) -> Self {
         Tick {
             started,
-            own: None,
-            embeddings: BTreeMap::new(),
-            workers: BTreeMap::new(),
-            facings: BTreeMap::new(),
+            own_frame: None,
             abstaining: BTreeSet::new(),
             votes: BTreeMap::new(),
             relayed: false,
@@ -260,6 +264,8 @@ pub struct Engine {
     own_feed: Repeats<(BBox, Vec<f32>)>,
     /// Each peer's feed: its embeddings.
     peer_feeds: BTreeMap<RobotId, Repeats<Vec<f32>>>,
+    /// Each peer's latest share.
+    peer_views: BTreeMap<RobotId, PeerView>,
     /// Every robot's record of agreeing with the others, ours included.
     trust: TrustBook,
     metrics: Metrics,
@@ -312,6 +318,7 @@ impl Engine {
             decided: BTreeMap::new(),
             own_feed: Repeats::default(),
             peer_feeds: BTreeMap::new(),
+            peer_views: BTreeMap::new(),
             trust,
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
@@ -375,10 +382,7 @@ impl Engine {
         self.open
             .values()
             .map(|t| {
-                let next = match &t.own {
-                    Some(o) if !o.vote_step_done => t.started + self.cfg.embedding_wait.min(self.cfg.decision_deadline),
-                    _ => t.started + self.cfg.decision_deadline,
-                };
+                let next = t.started + self.cfg.decision_deadline;
                 match self.cfg.relay_after {
                     Some(after) if !t.relayed => next.min(t.started + after),
                     _ => next,
@@ -393,15 +397,6 @@ impl Engine {
         match input {
             Input::Frame(f) => self.on_frame(f, now, &mut out),
             Input::Embedding(e) => self.on_embedding(e, now, &mut out),
-            Input::Vote(v) => {
-                let t = v.tick;
-                if self.peer_is_stale(&v.robot) {
-                    self.metrics.stale_peer_messages += 1;
-                } else if let Some(tick) = self.accept_peer(&v.robot.clone(), v.instance, t, now) {
-                    tick.votes.insert(v.robot.clone(), v);
-                    self.advance(t, now, &mut out);
-                }
-            }
             Input::Ballots(b) => self.on_ballots(b, now, &mut out),
             Input::Map(m) => {
                 // A peer's map fills in the stations ours lacks (floor/stations.rs);
@@ -424,6 +419,7 @@ impl Engine {
                 self.live.remove(&r);
                 self.active.remove(&r);
                 self.peer_feeds.remove(&r); // a robot that comes back is judged afresh
+                self.peer_views.remove(&r);
                 self.advance_all(now, &mut out);
             }
             Input::Poll => self.advance_all(now, &mut out),
@@ -435,7 +431,7 @@ impl Engine {
         if f.robot != self.cfg.robot {
             return; // the daemon only subscribes to our own detections
         }
-        if self.is_decided(f.tick) || self.open.get(&f.tick).is_some_and(|t| t.own.is_some()) {
+        if self.is_decided(f.tick) || self.open.get(&f.tick).is_some_and(|t| t.own_frame.is_some()) {
             self.metrics.stale_frames += 1;
             return;
         }
@@ -493,30 +489,27 @@ impl Engine {
         // A set that reads relations votes from the worker's track while it is fresh:
         // the team keeps an answer through a few frames in which nobody sees the worker.
         let will_vote = embedding.is_some() || (self.row_layout.reads_relations() && worker.is_some());
+        let shared = embedding.clone();
+        let own = OwnView { visibility, quality, embedding, keypoints, worker, facing, will_vote };
+        let vote = self.vote(f.tick, own);
         out.push(Output::Embedding(EmbeddingMsg {
             robot: self.cfg.robot.clone(),
             instance: self.cfg.instance,
             tick: f.tick,
-            embedding: embedding.clone(),
+            embedding: shared,
             visibility,
-            votes: will_vote,
+            vote: vote.clone(),
             worker,
             facing,
             landmarks,
             verdict: self.unshared_verdict.take(),
         }));
+        let me = self.cfg.robot.clone();
         let tick = self.open_tick(f.tick, now);
-        tick.own = Some(Own {
-            arrived: now,
-            visibility,
-            quality,
-            embedding,
-            keypoints,
-            worker,
-            facing,
-            will_vote,
-            vote_step_done: false,
-        });
+        tick.own_frame = Some(now);
+        if let Some(v) = vote {
+            tick.votes.insert(me, v);
+        }
         self.advance(f.tick, now, out);
     }
 
@@ -535,21 +528,24 @@ impl Engine {
             // Where a peer saw station objects stays true after its tick.
             self.floor.add_peer_landmarks(&e.landmarks, e.tick);
         }
-        if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
-            // A stale peer is heard as one that does not see the worker and abstains.
-            if stale || !e.votes {
-                tick.abstaining.insert(e.robot.clone());
-            }
-            if stale {
-                tick.embeddings.insert(e.robot.clone(), None);
+        if from_peer && self.peer_views.get(&e.robot).is_none_or(|v| v.tick <= e.tick) {
+            // A stale peer is heard as one that does not see the worker.
+            let view = if stale {
+                PeerView { tick: e.tick, embedding: None, worker: None, facing: None }
             } else {
-                if let Some(w) = e.worker {
-                    tick.workers.insert(e.robot.clone(), w);
+                PeerView { tick: e.tick, embedding: e.embedding, worker: e.worker, facing: e.facing }
+            };
+            self.peer_views.insert(e.robot.clone(), view);
+        }
+        if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
+            match e.vote {
+                // A stale peer is heard as one that abstains.
+                Some(v) if !stale => {
+                    tick.votes.entry(e.robot.clone()).or_insert(v);
                 }
-                if let Some(f) = e.facing {
-                    tick.facings.insert(e.robot.clone(), f);
+                _ => {
+                    tick.abstaining.insert(e.robot.clone());
                 }
-                tick.embeddings.insert(e.robot.clone(), e.embedding);
             }
             self.advance(e.tick, now, out);
         }
@@ -626,18 +622,6 @@ impl Engine {
     fn advance(&mut self, t: u64, now: Duration, out: &mut Vec<Output>) {
         let Some(tick) = self.open.get(&t) else { return };
         let decision_due = now >= tick.started + self.cfg.decision_deadline;
-        let expected_peers: Vec<RobotId> = self.live.intersection(&self.active).cloned().collect();
-
-        // Phase 1: our vote, once the peers' embeddings are in (or waited for long enough).
-        if tick.own.as_ref().is_some_and(|o| !o.vote_step_done) {
-            let all_in = expected_peers.iter().all(|r| tick.embeddings.contains_key(r));
-            if all_in || decision_due || now >= tick.started + self.cfg.embedding_wait {
-                if let Some(v) = self.vote(t) {
-                    self.open.get_mut(&t).expect("open").votes.insert(self.cfg.robot.clone(), v.clone());
-                    out.push(Output::Vote(v));
-                }
-            }
-        }
 
         // Relay: partway through the tick, the ballots we hold go to every peer.
         if let Some(after) = self.cfg.relay_after {
@@ -646,19 +630,10 @@ impl Engine {
             }
         }
 
-        // Phase 2: the decision, once every active member that said it votes voted.
+        // The decision, once our frame is in and every active member voted or abstained.
         let tick = &self.open[&t];
-        let Some(own) = &tick.own else {
-            if decision_due {
-                self.decide(t, DecidedBy::Deadline, now, out);
-            }
-            return;
-        };
-        if !own.vote_step_done {
-            return;
-        }
-        let all_voted =
-            expected_peers.iter().filter(|r| !tick.abstaining.contains(*r)).all(|r| tick.votes.contains_key(r));
+        let all_voted = tick.own_frame.is_some()
+            && self.live.intersection(&self.active).all(|r| tick.abstaining.contains(r) || tick.votes.contains_key(r));
         if all_voted {
             self.decide(t, DecidedBy::AllVoted, now, out);
         } else if decision_due {
@@ -666,18 +641,23 @@ impl Engine {
         }
     }
 
-    /// Adds tick `t`'s window row and, if we vote for the tick, runs the GRU and votes.
-    fn vote(&mut self, t: u64) -> Option<VoteMsg> {
-        let tick = self.open.get_mut(&t).expect("open");
-        let own = tick.own.as_mut().expect("own frame");
-        own.vote_step_done = true;
+    /// Adds tick `t`'s window row from our own view of it and our peers' latest shares
+    /// and, if we vote for the tick, runs the GRU and votes.
+    fn vote(&mut self, t: u64, own: OwnView) -> Option<VoteMsg> {
+        let peers: Vec<(&RobotId, &PeerView)> =
+            self.peer_views.iter().filter(|(_, v)| v.tick.abs_diff(t) <= PEER_VIEW_TICKS).collect();
         // Where each robot puts the worker this tick, ours first: an estimate most of
         // the others contradict is left out of the team's track and counts against its
         // robot's trust; so do peers we have learned to doubt.
         let me = &self.cfg.robot;
+        let predicted: Vec<(&RobotId, WorkerEstimate, Option<f32>)> = peers
+            .iter()
+            .filter_map(|(r, v)| {
+                Some((*r, floor::track::predict(v.worker.as_ref()?, t.saturating_sub(v.tick)), v.facing))
+            })
+            .collect();
         let ours = own.worker.as_ref().map(|estimate| (me, Sighting { estimate, facing: own.facing }));
-        let theirs =
-            tick.workers.iter().map(|(r, estimate)| (r, Sighting { estimate, facing: tick.facings.get(r).copied() }));
+        let theirs = predicted.iter().map(|(r, estimate, facing)| (*r, Sighting { estimate, facing: *facing }));
         let (robots, sightings): (Vec<&RobotId>, Vec<Sighting>) = ours.into_iter().chain(theirs).unzip();
         let trust = &self.trust;
         let team = floor::team_worker(&sightings, |i| robots[i] == me || trust.fuses(robots[i]));
@@ -685,7 +665,7 @@ impl Engine {
         let slots = self.inference.peer_slots();
         let fused_peers = if slots > 0 { team.kept_peers(&sightings, |i| robots[i] == me) } else { Vec::new() };
         let peers_mean =
-            temporal::mean(tick.embeddings.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, e)| e.as_deref()));
+            temporal::mean(peers.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, v)| v.embedding.as_deref()));
         // Judged after the fusion above, which used the trust earned before this tick;
         // the trust our vote carries below includes this judgement.
         for (robot, ok) in robots.iter().zip(team.agrees.iter().flatten()) {
@@ -704,9 +684,7 @@ impl Engine {
             floor::peer_set(&fused_peers, &self.floor.team_map.stations(), slots, &mut p);
             p
         });
-        // The row is the last use of our embedding and keypoints: move them, don't copy.
-        let row =
-            Row { own: own.embedding.take(), peers_mean, keypoints: own.keypoints.take(), relations, facing, peers };
+        let row = Row { own: own.embedding, peers_mean, keypoints: own.keypoints, relations, facing, peers };
         let (visibility, quality) = (own.visibility, own.quality);
         self.window.insert(t, row);
         if !will_vote {
@@ -783,8 +761,8 @@ impl Engine {
         let voters: Vec<RobotId> = ballots.iter().map(|b| b.robot.clone()).collect();
         self.trust.learn(&ballots, self.cfg.consensus);
         self.metrics.observe(Stage::Consensus, t0.elapsed());
-        if let Some(own) = &tick.own {
-            self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(own.arrived));
+        if let Some(arrived) = tick.own_frame {
+            self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(arrived));
         }
         self.metrics.decisions += 1;
         if by == DecidedBy::Deadline {
@@ -856,7 +834,6 @@ pub(crate) mod tests {
             robot: id(robot),
             instance: 1,
             temporal: TemporalModel::Collective,
-            embedding_wait: Duration::from_millis(30),
             decision_deadline: Duration::from_millis(60),
             consensus: Rule::Trust,
             trust: TrustConfig::default(),
@@ -909,15 +886,22 @@ pub(crate) mod tests {
         VoteMsg { robot: id(robot), instance, tick, steps, visibility: 1, trust: 1.0, quality: 1.0, signature: vec![] }
     }
 
-    /// A peer's embedding, worker estimate and whether it votes (no landmarks).
-    fn embedding_msg(robot: &str, tick: u64, x: f32, votes: bool, worker: Option<WorkerEstimate>) -> EmbeddingMsg {
+    /// A peer's share of a tick (instance 2, no landmarks): an embedding of `x`s if it
+    /// sees the worker, its vote if it votes, its estimate of the worker.
+    fn share(
+        robot: &str,
+        tick: u64,
+        x: Option<f32>,
+        vote: Option<Vec<StepVote>>,
+        worker: Option<WorkerEstimate>,
+    ) -> EmbeddingMsg {
         EmbeddingMsg {
             robot: id(robot),
             instance: 2,
             tick,
-            embedding: Some(vec![x; EMBEDDING_DIM]),
+            embedding: x.map(|x| vec![x; EMBEDDING_DIM]),
             visibility: 3,
-            votes,
+            vote: vote.map(|steps| vote_msg(robot, 2, tick, steps)),
             worker,
             facing: None,
             landmarks: Vec::new(),
@@ -925,8 +909,18 @@ pub(crate) mod tests {
         }
     }
 
+    /// A peer's share of a tick in which it neither sees the worker nor votes.
+    fn abstaining(robot: &str, tick: u64) -> Input {
+        Input::Embedding(share(robot, tick, None, None, None))
+    }
+
+    fn one_step(class: Station) -> Vec<StepVote> {
+        vec![StepVote { class, confidence: 1.0 }]
+    }
+
+    /// Our vote, in our share of the tick.
     fn take_vote(out: &[Output]) -> VoteMsg {
-        out.iter().find_map(|o| if let Output::Vote(v) = o { Some(v.clone()) } else { None }).expect("a vote")
+        take_embedding(out).vote.expect("a vote")
     }
 
     fn take_embedding(out: &[Output]) -> EmbeddingMsg {
@@ -955,8 +949,8 @@ pub(crate) mod tests {
         let set = models();
         let mut e = engine("a", &set);
         let out = e.handle(Input::Frame(frame("a", 1, false)), ms(0));
-        assert_eq!(take_embedding(&out).embedding, None);
-        assert!(out.iter().all(|o| !matches!(o, Output::Vote(_))));
+        let e = take_embedding(&out);
+        assert_eq!((e.embedding, e.vote), (None, None));
         assert!(decisions(&out)[0].steps.is_empty());
     }
 
@@ -974,20 +968,17 @@ pub(crate) mod tests {
         assert_eq!(decisions(&warm_a).len(), 1);
         assert_eq!(decisions(&warm_b).len(), 1);
 
-        // Tick 2: now both are active; nobody decides before hearing the other.
+        // Tick 2: now both are active; each votes at once and decides on hearing the other.
         let out_a = a.handle(Input::Embedding(take_embedding(&warm_b)), ms(1)); // late for tick 1
         assert!(out_a.is_empty());
         assert_eq!(a.metrics.late_messages, 1);
         b.handle(Input::Embedding(take_embedding(&warm_a)), ms(1));
         let oa = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
         let ob = b.handle(Input::Frame(frame("b", 2, true)), ms(100));
-        assert!(oa.iter().all(|o| matches!(o, Output::Embedding(_))), "a must wait for b's embedding");
-        let oa2 = a.handle(Input::Embedding(take_embedding(&ob)), ms(101));
-        let ob2 = b.handle(Input::Embedding(take_embedding(&oa)), ms(101));
-        let (va, vb) = (take_vote(&oa2), take_vote(&ob2));
-        assert!(decisions(&oa2).is_empty(), "a must wait for b's vote");
-        let da = a.handle(Input::Vote(vb), ms(102));
-        let db = b.handle(Input::Vote(va), ms(102));
+        take_vote(&oa);
+        assert!(decisions(&oa).is_empty(), "a must wait for b's share of the tick");
+        let da = a.handle(Input::Embedding(take_embedding(&ob)), ms(101));
+        let db = b.handle(Input::Embedding(take_embedding(&oa)), ms(101));
         let (da, db) = (decisions(&da)[0], decisions(&db)[0]);
         assert_eq!(da.steps, db.steps, "same votes, same decision");
         assert_eq!(da.voters, vec![id("a"), id("b")]);
@@ -1000,28 +991,12 @@ pub(crate) mod tests {
         let mut a = engine("a", &set);
         a.handle(Input::MemberJoined(id("b")), ms(0));
         a.handle(Input::Frame(frame("a", 1, true)), ms(0));
-        a.handle(
-            Input::Embedding(EmbeddingMsg {
-                robot: id("b"),
-                instance: 9,
-                tick: 1,
-                embedding: None,
-                visibility: 0,
-                votes: false,
-                worker: None,
-                facing: None,
-                landmarks: vec![],
-                verdict: None,
-            }),
-            ms(1),
-        );
+        a.handle(abstaining("b", 1), ms(1));
         let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
-        assert!(decisions(&out).is_empty());
-        assert_eq!(a.next_deadline(), Some(ms(130)));
-        let out = a.handle(Input::Poll, ms(130));
         take_vote(&out);
         assert!(decisions(&out).is_empty());
         assert_eq!(a.next_deadline(), Some(ms(160)));
+        assert!(a.handle(Input::Poll, ms(159)).is_empty());
         let out = a.handle(Input::Poll, ms(160));
         assert_eq!(decisions(&out)[0].decided_by, DecidedBy::Deadline);
         assert_eq!(a.metrics.decisions_by_deadline, 1);
@@ -1034,41 +1009,12 @@ pub(crate) mod tests {
         a.handle(Input::Frame(frame("a", 1, true)), ms(0));
         for r in ["b", "c"] {
             a.handle(Input::MemberJoined(id(r)), ms(0));
-            a.handle(
-                Input::Embedding(EmbeddingMsg {
-                    robot: id(r),
-                    instance: 9,
-                    tick: 1,
-                    embedding: None,
-                    visibility: 0,
-                    votes: false,
-                    worker: None,
-                    facing: None,
-                    landmarks: vec![],
-                    verdict: None,
-                }),
-                ms(0),
-            );
+            a.handle(abstaining(r, 1), ms(0));
         }
-        a.handle(Input::Frame(frame("a", 2, true)), ms(100));
+        take_vote(&a.handle(Input::Frame(frame("a", 2, true)), ms(100)));
         // c does not see the worker: its vote is not expected.
-        a.handle(
-            Input::Embedding(EmbeddingMsg {
-                robot: id("c"),
-                instance: 9,
-                tick: 2,
-                embedding: None,
-                visibility: 1,
-                votes: false,
-                worker: None,
-                facing: None,
-                landmarks: vec![],
-                verdict: None,
-            }),
-            ms(101),
-        );
+        assert!(decisions(&a.handle(abstaining("c", 2), ms(101))).is_empty(), "b has not been heard");
         let out = a.handle(Input::MemberLeft(id("b")), ms(102));
-        take_vote(&out);
         let d = decisions(&out);
         assert_eq!(d[0].decided_by, DecidedBy::AllVoted);
         assert_eq!(d[0].live_members, 2);
@@ -1078,9 +1024,10 @@ pub(crate) mod tests {
     fn a_second_daemon_with_our_id_is_detected() {
         let set = models();
         let mut a = engine("a", &set);
-        a.handle(Input::Vote(vote_msg("a", 1, 5, vec![])), ms(0));
+        let ours = |instance| Input::Embedding(EmbeddingMsg { instance, ..share("a", 5, None, None, None) });
+        a.handle(ours(1), ms(0));
         assert!(a.duplicates.is_empty(), "our own echo is not a clash");
-        a.handle(Input::Vote(vote_msg("a", 2, 5, vec![])), ms(0));
+        a.handle(ours(2), ms(0));
         assert_eq!(a.duplicates.iter().copied().collect::<Vec<_>>(), vec![2]);
         assert_eq!(a.metrics.duplicate_id_messages, 1);
     }
@@ -1093,10 +1040,7 @@ pub(crate) mod tests {
         assert!(a.handle(Input::Frame(frame("a", 1, true)), ms(1)).is_empty());
         assert_eq!(a.metrics.stale_frames, 1);
         for t in 100..120 {
-            a.handle(
-                Input::Vote(vote_msg("z", 3, t, vec![StepVote { class: Station::Storage, confidence: 1.0 }])),
-                ms(2),
-            );
+            a.handle(Input::Embedding(share("z", t, None, Some(one_step(Station::Storage)), None)), ms(2));
         }
         assert_eq!(a.open.len(), 8);
         assert_eq!(a.metrics.evicted_ticks, 12);
@@ -1126,16 +1070,8 @@ pub(crate) mod tests {
         let out = a.handle(Input::Frame(frame("a", 4, true)), ms(400));
         assert!(take_embedding(&out).landmarks.is_empty());
         let peer = EmbeddingMsg {
-            robot: id("b"),
-            instance: 2,
-            tick: 4,
-            embedding: None,
-            visibility: 1,
-            votes: false,
-            worker: None,
-            facing: None,
             landmarks: vec![Landmark { station: Station::Manufacturing, position: [9.0, 9.0], sigma: 0.3 }; 3],
-            verdict: None,
+            ..share("b", 4, None, None, None)
         };
         a.handle(Input::Embedding(peer), ms(401));
         assert!(
@@ -1192,27 +1128,30 @@ pub(crate) mod tests {
         // Tick 4: the worker is not seen, but the track is fresh: announce a vote and vote.
         let out = a.handle(Input::Frame(localised(4, false)), ms(400));
         let e = take_embedding(&out);
-        assert!(e.embedding.is_none() && e.worker.is_some() && e.votes, "{e:?}");
-        take_vote(&out);
+        assert!(e.embedding.is_none() && e.worker.is_some() && e.vote.is_some(), "{e:?}");
         assert!(!decisions(&out)[0].steps.is_empty(), "the team still has an answer");
         // Longer than FRESH_TICKS without the worker: the track is stale, no vote.
         let stale = 3 + floor::track::FRESH_TICKS + 1;
         let out = a.handle(Input::Frame(localised(stale, false)), ms(100 * stale));
         let e = take_embedding(&out);
-        assert!(e.worker.is_none() && !e.votes);
-        assert!(out.iter().all(|o| !matches!(o, Output::Vote(_))));
-        // A peer that announced a vote is waited for; one that did not is not.
+        assert!(e.worker.is_none() && e.vote.is_none());
+        // A peer is waited for until its share of the tick comes, with its vote or without.
         let mut b = engine("b", &set);
         b.handle(Input::MemberJoined(id("a")), ms(0));
-        let announce = |votes| EmbeddingMsg { votes, ..e.clone() };
-        b.handle(Input::Embedding(EmbeddingMsg { tick: 15, ..announce(false) }), ms(1500)); // a is now an active member
-        b.handle(Input::Embedding(EmbeddingMsg { tick: 20, ..announce(true) }), ms(1900));
+        let from_a = |tick, votes: bool| {
+            let vote =
+                votes.then(|| VoteMsg { instance: e.instance, ..vote_msg("a", 1, tick, one_step(Station::Assembly)) });
+            Input::Embedding(EmbeddingMsg { tick, vote, ..e.clone() })
+        };
+        b.handle(from_a(15, false), ms(1500)); // a is now an active member
         let out = b.handle(Input::Frame(DetectionFrame { robot: id("b"), ..localised(20, true) }), ms(1900));
         take_vote(&out);
-        assert!(decisions(&out).is_empty(), "a said it votes for tick 20: b waits for it");
-        b.handle(Input::Embedding(EmbeddingMsg { tick: 21, ..announce(false) }), ms(2000));
+        assert!(decisions(&out).is_empty(), "b waits for a's share of tick 20");
+        let d = decisions(&b.handle(from_a(20, true), ms(1901)))[0].clone();
+        assert_eq!(d.voters, vec![id("a"), id("b")]);
+        b.handle(from_a(21, false), ms(2000));
         let out = b.handle(Input::Frame(DetectionFrame { robot: id("b"), ..localised(21, true) }), ms(2000));
-        assert_eq!(decisions(&out).len(), 1, "a said it abstains from tick 21: b decides at once");
+        assert_eq!(decisions(&out)[0].voters, vec![id("b")], "a abstains from tick 21: b decides at once");
     }
 
     /// The last row of a collective window at tick `t`, as the GRU reads it.
@@ -1297,23 +1236,16 @@ pub(crate) mod tests {
         team
     }
 
-    /// Tick `t` where all three see the worker and a's vote never reaches b directly.
+    /// Tick `t` where all three see the worker and a's share never reaches b directly.
     /// Returns each robot's outputs of the tick so far.
     fn tick_losing_a_vote_to_b(team: &mut [Engine], t: u64) -> Vec<Vec<Output>> {
         let now = ms(100 * t);
         let mut outs: Vec<Vec<Output>> =
             (0..3).map(|i| team[i].handle(Input::Frame(frame(["a", "b", "c"][i], t, true)), now)).collect();
-        let embeddings: Vec<Input> = outs.iter().map(|o| Input::Embedding(take_embedding(o))).collect();
+        let shares: Vec<Input> = outs.iter().map(|o| Input::Embedding(take_embedding(o))).collect();
         for i in 0..3 {
-            for (j, e) in embeddings.iter().enumerate().filter(|(j, _)| *j != i) {
+            for (j, e) in shares.iter().enumerate().filter(|(j, _)| *j != i && !(*j == 0 && i == 1)) {
                 let said = team[i].handle(e.clone(), now + ms(1 + j as u64));
-                outs[i].extend(said);
-            }
-        }
-        let votes: Vec<VoteMsg> = outs.iter().map(|o| take_vote(o)).collect();
-        for i in 0..3 {
-            for (j, v) in votes.iter().enumerate().filter(|(j, _)| *j != i && !(*j == 0 && i == 1)) {
-                let said = team[i].handle(Input::Vote(v.clone()), now + ms(5 + j as u64));
                 outs[i].extend(said);
             }
         }
@@ -1389,17 +1321,12 @@ pub(crate) mod tests {
         let set = models();
         let mut a = relaying("a", &set, Some(ms(40)));
         a.handle(Input::MemberJoined(id("b")), ms(0));
-        a.handle(
-            Input::Vote(vote_msg("b", 2, 1, vec![StepVote { class: Station::Workstation, confidence: 0.5 }])),
-            ms(0),
-        );
-        a.handle(Input::Poll, ms(99)); // tick 1, opened by b's vote, is decided
+        a.handle(Input::Embedding(share("b", 1, None, Some(one_step(Station::Workstation)), None)), ms(0));
+        a.handle(Input::Poll, ms(99)); // tick 1, opened by b's share, is decided
                                        // b is an active member; a's own frame shows the worker at tick 2, b stays silent.
         let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
         assert!(out.iter().all(|o| !matches!(o, Output::Ballots(_))));
-        assert_eq!(a.next_deadline(), Some(ms(130)), "the embedding wait comes first");
-        a.handle(Input::Poll, ms(130));
-        assert_eq!(a.next_deadline(), Some(ms(140)), "then the relay");
+        assert_eq!(a.next_deadline(), Some(ms(140)), "the relay comes first");
         let out = a.handle(Input::Poll, ms(140));
         let Some(Output::Ballots(b)) = out.first() else { panic!("a relay at 40 ms: {out:?}") };
         assert_eq!((b.tick, b.votes.len(), &b.votes[0].robot), (2, 1, &id("a")));
@@ -1455,8 +1382,7 @@ pub(crate) mod tests {
         for t in 5..=7 {
             let out = a.handle(Input::Frame(DetectionFrame { tick: t, ..frozen.clone() }), ms(100 * t));
             let e = take_embedding(&out);
-            assert!(e.embedding.is_none() && !e.votes && e.visibility == 0 && e.worker.is_none(), "{e:?}");
-            assert!(out.iter().all(|o| !matches!(o, Output::Vote(_))), "tick {t}: a frozen feed does not vote");
+            assert!(e.embedding.is_none() && e.vote.is_none() && e.visibility == 0 && e.worker.is_none(), "{e:?}");
             assert!(decisions(&out)[0].steps.is_empty());
         }
         assert!(a.feed_is_stale());
@@ -1478,23 +1404,19 @@ pub(crate) mod tests {
         };
         for t in 1..=7u64 {
             let now = ms(100 * t);
-            b.handle(Input::Embedding(EmbeddingMsg { tick: t, ..frozen.clone() }), now);
+            b.handle(Input::Embedding(EmbeddingMsg { tick: t, vote: Some(vote_of_a(t)), ..frozen.clone() }), now);
             let out = b.handle(Input::Frame(frame("b", t, true)), now);
             let mine = take_vote(&out);
+            let d = decisions(&out);
             if t < 5 {
-                assert!(decisions(&out).is_empty(), "tick {t}: b waits for a's vote");
-                let d = b.handle(Input::Vote(vote_of_a(t)), now + ms(1));
-                assert_eq!(decisions(&d)[0].voters, vec![id("a"), id("b")]);
+                assert_eq!(d[0].voters, vec![id("a"), id("b")], "tick {t}: a's vote counts");
             } else {
-                let d = decisions(&out);
-                assert_eq!(d.len(), 1, "tick {t}: a's feed repeats itself, b does not wait for it");
-                assert_eq!(d[0].voters, vec![id("b")]);
+                assert_eq!(d[0].voters, vec![id("b")], "tick {t}: a's feed repeats itself, its vote is left out");
                 assert_eq!(d[0].steps[0].class, mine.steps[0].class);
-                assert!(b.handle(Input::Vote(vote_of_a(t)), now + ms(1)).is_empty());
             }
         }
         assert_eq!(b.stale_peers(), vec![id("a")]);
-        assert_eq!(b.metrics.stale_peer_messages, 3 * 2, "three embeddings and three votes left out");
+        assert_eq!(b.metrics.stale_peer_messages, 3, "three shares left out");
         let moving = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 8, true)), ms(0)));
         b.handle(Input::Embedding(moving), ms(800));
         assert!(b.stale_peers().is_empty(), "a's feed moves again");
@@ -1512,7 +1434,8 @@ pub(crate) mod tests {
             a.handle(Input::Frame(frame("a", t, false)), now);
             for (p, class) in [("b", Station::Workstation), ("c", Station::Workstation), ("d", Station::Manufacturing)]
             {
-                a.handle(Input::Vote(vote_msg(p, 2, t, vec![StepVote { class, confidence: 0.8 }; 3])), now);
+                let steps = vec![StepVote { class, confidence: 0.8 }; 3];
+                a.handle(Input::Embedding(share(p, t, None, Some(steps), None)), now);
             }
             a.handle(Input::Poll, now + ms(99));
         }
@@ -1531,16 +1454,14 @@ pub(crate) mod tests {
         assert_eq!((trust[&id("b")], trust[&id("c")]), (1.0, 1.0));
         assert!(!trust.contains_key(&id("a")), "a never voted: never judged");
 
-        // Tick 151: a sees the worker and fuses its peers' embeddings into its row. What
-        // d sends changes nothing; what b sends does.
+        // Tick 152: a sees the worker and fuses its peers' latest embeddings (of tick
+        // 151) into its row. What d sent changes nothing; what b sent does.
         let vote_with = |b: f32, d: f32| {
             let mut a = a_after_d_kept_disagreeing(&set);
-            let now = ms(15_100);
-            let mut out = a.handle(Input::Frame(frame("a", 151, true)), now);
             for (p, x) in [("b", b), ("c", 0.3), ("d", d)] {
-                out.extend(a.handle(Input::Embedding(embedding_msg(p, 151, x, true, None)), now));
+                a.handle(Input::Embedding(share(p, 151, Some(x), None, None)), ms(15_100));
             }
-            take_vote(&out) // a votes once every embedding is in
+            take_vote(&a.handle(Input::Frame(frame("a", 152, true)), ms(15_200)))
         };
         assert_eq!(vote_with(0.3, -0.9).steps, vote_with(0.3, 0.9).steps, "d is not fused");
         assert_ne!(vote_with(-0.9, 0.3).steps, vote_with(0.9, 0.3).steps, "b is");
@@ -1560,13 +1481,14 @@ pub(crate) mod tests {
             // b and c place the worker 0.3 m apart, d 4 m away; all three abstain
             for (p, x) in [("b", 5.0), ("c", 5.3), ("d", 9.0)] {
                 // the embedding moves every tick: no peer's feed looks frozen
-                let e = embedding_msg(p, t, x * 0.01 + t as f32 * 1e-3, false, Some(at(x)));
+                let e = share(p, t, Some(x * 0.01 + t as f32 * 1e-3), None, Some(at(x)));
                 a.handle(Input::Embedding(e), now);
             }
             a.handle(Input::Poll, now + ms(99));
         }
         let trust = a.trust();
-        // judged on ticks 2..=100 (on tick 1 nobody had been heard from yet)
+        // judged on ticks 2..=100, each on the estimates of the tick before (on tick 1
+        // nobody had been heard from yet)
         assert!((trust[&id("d")] - 0.99f32.powi(99)).abs() < 1e-3, "{trust:?}");
         assert_eq!((trust[&id("b")], trust[&id("c")]), (1.0, 1.0));
         assert_eq!(a.metrics.decisions, 100, "nobody voted, every tick was still decided");
@@ -1580,21 +1502,12 @@ pub(crate) mod tests {
         let mut trusts = Vec::new();
         for t in 1..=30u64 {
             let now = ms(100 * t);
-            let mut out = a.handle(Input::Frame(frame("a", t, true)), now);
-            out.extend(a.handle(Input::Poll, now + ms(31))); // b sends no embedding
-            let ours = take_vote(&out);
+            let ours = take_vote(&a.handle(Input::Frame(frame("a", t, true)), now));
             trusts.push(ours.trust);
             // b always votes another class than ours, as sure as we are
-            let theirs = vote_msg(
-                "b",
-                2,
-                t,
-                ours.steps
-                    .iter()
-                    .map(|s| StepVote { class: Station::ALL[(s.class.index() + 1) % NUM_CLASSES], ..*s })
-                    .collect(),
-            );
-            a.handle(Input::Vote(theirs), now + ms(32));
+            let theirs =
+                ours.steps.iter().map(|s| StepVote { class: Station::ALL[(s.class.index() + 1) % NUM_CLASSES], ..*s });
+            a.handle(Input::Embedding(share("b", t, None, Some(theirs.collect()), None)), now + ms(32));
             a.handle(Input::Poll, now + ms(99));
         }
         // Tick 1 a decided alone (b not heard from yet): judged from tick 2 on.

@@ -11,10 +11,10 @@
 //! | topic | payload |
 //! |---|---|
 //! | `/spwi/config` | the engine configuration and model set name (JSON, once) |
-//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/vote`, `/spwi/in/ballots`, `/spwi/in/map` | a received message |
+//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/ballots`, `/spwi/in/map` | a received message |
 //! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (JSON) |
 //! | `/spwi/in/poll` | empty: time passed |
-//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map` | a published message |
+//! | `/spwi/out/embedding`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map` | a published message |
 //! | `/spwi/state` | after each decision, whom the robot trusts and whose feed it sets aside ([`PeerState`], JSON) |
 //!
 //! Log and publish times are nanoseconds of engine time (since the daemon started).
@@ -86,13 +86,11 @@ enum Channel {
     Config,
     InDetections,
     InEmbedding,
-    InVote,
     InBallots,
     InMap,
     InMembership,
     InPoll,
     OutEmbedding,
-    OutVote,
     OutBallots,
     OutDecision,
     OutMap,
@@ -100,17 +98,15 @@ enum Channel {
 }
 
 impl Channel {
-    const ALL: [Channel; 14] = [
+    const ALL: [Channel; 12] = [
         Channel::Config,
         Channel::InDetections,
         Channel::InEmbedding,
-        Channel::InVote,
         Channel::InBallots,
         Channel::InMap,
         Channel::InMembership,
         Channel::InPoll,
         Channel::OutEmbedding,
-        Channel::OutVote,
         Channel::OutBallots,
         Channel::OutDecision,
         Channel::OutMap,
@@ -122,13 +118,11 @@ impl Channel {
             Channel::Config => "/spwi/config",
             Channel::InDetections => "/spwi/in/detections",
             Channel::InEmbedding => "/spwi/in/embedding",
-            Channel::InVote => "/spwi/in/vote",
             Channel::InBallots => "/spwi/in/ballots",
             Channel::InMap => "/spwi/in/map",
             Channel::InMembership => "/spwi/in/membership",
             Channel::InPoll => "/spwi/in/poll",
             Channel::OutEmbedding => "/spwi/out/embedding",
-            Channel::OutVote => "/spwi/out/vote",
             Channel::OutBallots => "/spwi/out/ballots",
             Channel::OutDecision => "/spwi/out/decision",
             Channel::OutMap => "/spwi/out/map",
@@ -182,7 +176,6 @@ impl Recorder {
         match input {
             Input::Frame(m) => self.write(Channel::InDetections, now, &encode(m)),
             Input::Embedding(m) => self.write(Channel::InEmbedding, now, &encode(m)),
-            Input::Vote(m) => self.write(Channel::InVote, now, &encode(m)),
             Input::Ballots(m) => self.write(Channel::InBallots, now, &encode(m)),
             Input::Map(m) => self.write(Channel::InMap, now, &encode(m)),
             Input::MemberJoined(r) | Input::MemberLeft(r) => {
@@ -197,7 +190,6 @@ impl Recorder {
     pub fn output(&mut self, output: &Output, now: Duration) -> Result<()> {
         match output {
             Output::Embedding(m) => self.write(Channel::OutEmbedding, now, &encode(m)),
-            Output::Vote(m) => self.write(Channel::OutVote, now, &encode(m)),
             Output::Ballots(m) => self.write(Channel::OutBallots, now, &encode(m)),
             Output::Decision(m) => self.write(Channel::OutDecision, now, &encode(m)),
             Output::Map(m) => self.write(Channel::OutMap, now, &encode(m)),
@@ -247,7 +239,6 @@ pub fn read(path: &Path) -> Result<Recording> {
             Some(Channel::Config) => config = Some(serde_json::from_slice(d).with_context(ctx)?),
             Some(Channel::InDetections) => inputs.push((now, Input::Frame(decode(d).with_context(ctx)?))),
             Some(Channel::InEmbedding) => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
-            Some(Channel::InVote) => inputs.push((now, Input::Vote(decode(d).with_context(ctx)?))),
             Some(Channel::InBallots) => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
             Some(Channel::InMap) => inputs.push((now, Input::Map(decode(d).with_context(ctx)?))),
             Some(Channel::InMembership) => {
@@ -256,7 +247,6 @@ pub fn read(path: &Path) -> Result<Recording> {
             }
             Some(Channel::InPoll) => inputs.push((now, Input::Poll)),
             Some(Channel::OutEmbedding) => outputs.push(Output::Embedding(decode(d).with_context(ctx)?)),
-            Some(Channel::OutVote) => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
             Some(Channel::OutBallots) => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
             Some(Channel::OutDecision) => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
             Some(Channel::OutMap) => outputs.push(Output::Map(decode(d).with_context(ctx)?)),

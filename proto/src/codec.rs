@@ -15,8 +15,9 @@ use serde::Serialize;
 /// frame, worker estimate and landmarks in the embedding message; 3: relayed ballots,
 /// the ballot digest in the decision; 4: the voter's standing and view quality in the
 /// vote; 5: the voter's signature; 6: the worker's facing in the embedding message;
-/// 7: the robot's latest verdict in the embedding message).
-pub const PROTOCOL_VERSION: u16 = 7;
+/// 7: the robot's latest verdict in the embedding message; 8: the vote in the embedding
+/// message, no vote topic).
+pub const PROTOCOL_VERSION: u16 = 8;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -58,6 +59,7 @@ macro_rules! message {
 }
 message!(DetectionFrame, "detections", robot);
 message!(EmbeddingMsg, "embedding", robot);
+// A vote travels inside embedding and ballots messages; alone it is encoded to be signed.
 message!(VoteMsg, "vote", robot);
 message!(DecisionMsg, "decision", robot);
 message!(BallotsMsg, "ballots", robot);
@@ -193,7 +195,7 @@ mod tests {
             tick: 9,
             embedding: None,
             visibility: 3,
-            votes: true,
+            vote: None,
             worker: None,
             facing: None,
             landmarks: Vec::new(),
@@ -211,9 +213,9 @@ mod tests {
     }
 
     #[test]
-    fn a_version_6_embedding_without_the_verdict_is_refused_and_a_verdict_names_its_voters_in_order() {
+    fn a_version_7_embedding_without_the_vote_is_refused_and_a_verdict_names_its_voters_in_order() {
         #[derive(serde::Serialize)]
-        struct EmbeddingV6 {
+        struct EmbeddingV7 {
             robot: RobotId,
             instance: u64,
             tick: u64,
@@ -223,9 +225,10 @@ mod tests {
             worker: Option<WorkerEstimate>,
             facing: Option<f32>,
             landmarks: Vec<Landmark>,
+            verdict: Option<Verdict>,
         }
         let r = |s: &str| RobotId::new(s).unwrap();
-        let old = EmbeddingV6 {
+        let old = EmbeddingV7 {
             robot: r("r1"),
             instance: 1,
             tick: 9,
@@ -235,9 +238,10 @@ mod tests {
             worker: None,
             facing: None,
             landmarks: Vec::new(),
+            verdict: None,
         };
-        let b = bincode::serde::encode_to_vec((6u16, old), CONFIG).unwrap();
-        assert!(matches!(decode::<EmbeddingMsg>(&b), Err(DecodeError::UnknownVersion { got: 6, .. })));
+        let b = bincode::serde::encode_to_vec((7u16, old), CONFIG).unwrap();
+        assert!(matches!(decode::<EmbeddingMsg>(&b), Err(DecodeError::UnknownVersion { got: 7, .. })));
         let verdict = Verdict { tick: 8, class: Some(Station::Assembly), voters: vec![r("r1"), r("r2")], digest: 77 };
         let mut now = EmbeddingMsg { verdict: Some(verdict.clone()), ..embedding() };
         assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
@@ -246,6 +250,26 @@ mod tests {
             let e = decode::<EmbeddingMsg>(&encode(&now)).unwrap_err().to_string();
             assert!(e.contains("field `verdict.voters`") && e.contains("must be sorted, each once"), "{e}");
         }
+    }
+
+    #[test]
+    fn the_vote_in_an_embedding_message_is_its_robots_for_its_tick_and_valid() {
+        let ours = VoteMsg { instance: 1, tick: 9, ..vote() };
+        let now = EmbeddingMsg { vote: Some(ours.clone()), ..embedding() };
+        assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
+        for other in [
+            VoteMsg { tick: 8, ..ours.clone() },
+            VoteMsg { instance: 2, ..ours.clone() },
+            VoteMsg { robot: RobotId::new("r2").unwrap(), ..ours.clone() },
+        ] {
+            let e = decode::<EmbeddingMsg>(&encode(&EmbeddingMsg { vote: Some(other), ..embedding() }))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("field `vote`") && e.contains("in r1's message of tick 9"), "{e}");
+        }
+        let bad = VoteMsg { trust: 2.0, ..ours };
+        let e = decode::<EmbeddingMsg>(&encode(&EmbeddingMsg { vote: Some(bad), ..embedding() })).unwrap_err();
+        assert!(e.to_string().contains("field `trust`"), "{e}");
     }
 
     #[test]

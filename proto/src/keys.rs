@@ -3,8 +3,7 @@
 //! | key expression                           | payload                         | published by   |
 //! |------------------------------------------|---------------------------------|----------------|
 //! | `spwi/<fleet>/robot/<robot>/detections`  | [`DetectionFrame`]              | world / detector node |
-//! | `spwi/<fleet>/robot/<robot>/embedding`   | [`EmbeddingMsg`]                | agent          |
-//! | `spwi/<fleet>/robot/<robot>/vote`        | [`VoteMsg`]                     | agent          |
+//! | `spwi/<fleet>/robot/<robot>/embedding`   | [`EmbeddingMsg`] (and the vote) | agent          |
 //! | `spwi/<fleet>/robot/<robot>/decision`    | [`DecisionMsg`] (for observers) | agent          |
 //! | `spwi/<fleet>/robot/<robot>/ballots`     | [`BallotsMsg`] (relayed votes)  | agent          |
 //! | `spwi/<fleet>/robot/<robot>/map`         | [`MapMsg`] (when a robot joins) | agent          |
@@ -13,7 +12,6 @@
 //!
 //! [`DetectionFrame`]: crate::DetectionFrame
 //! [`EmbeddingMsg`]: crate::EmbeddingMsg
-//! [`VoteMsg`]: crate::VoteMsg
 //! [`DecisionMsg`]: crate::DecisionMsg
 //! [`BallotsMsg`]: crate::BallotsMsg
 //! [`MapMsg`]: crate::MapMsg
@@ -28,21 +26,18 @@ const ROOT: &str = "spwi";
 pub enum Topic {
     Detections,
     Embedding,
-    Vote,
     Decision,
     Ballots,
     Map,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 6] =
-        [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Ballots, Topic::Map];
+    pub const ALL: [Topic; 5] = [Topic::Detections, Topic::Embedding, Topic::Decision, Topic::Ballots, Topic::Map];
 
     pub fn as_str(self) -> &'static str {
         match self {
             Topic::Detections => "detections",
             Topic::Embedding => "embedding",
-            Topic::Vote => "vote",
             Topic::Decision => "decision",
             Topic::Ballots => "ballots",
             Topic::Map => "map",
@@ -131,7 +126,7 @@ mod tests {
             let k = robot_topic(&f, &r, t);
             assert_eq!(parse_robot_topic(&f, &k), Some((r.clone(), t)));
         }
-        assert_eq!(robot_topic(&f, &r, Topic::Vote), "spwi/f1/robot/r-2/vote");
+        assert_eq!(robot_topic(&f, &r, Topic::Ballots), "spwi/f1/robot/r-2/ballots");
         assert_eq!(all_robots(&f, Topic::Embedding), "spwi/f1/robot/*/embedding");
     }
 
@@ -139,12 +134,13 @@ mod tests {
     fn foreign_or_malformed_keys_are_not_parsed() {
         let (f, _) = ids();
         for k in [
-            "spwi/f2/robot/r/vote",
-            "spwi/f1/robot/r/vote/extra",
+            "spwi/f2/robot/r/ballots",
+            "spwi/f1/robot/r/ballots/extra",
             "spwi/f1/robot/r/other",
-            "spwi/f1/robots/r/vote",
-            "xx/f1/robot/r/vote",
-            "spwi/f1/robot/*/vote",
+            "spwi/f1/robot/r/vote", // protocol 7's votes ride in the embedding message now
+            "spwi/f1/robots/r/ballots",
+            "xx/f1/robot/r/ballots",
+            "spwi/f1/robot/*/ballots",
         ] {
             assert_eq!(parse_robot_topic(&f, k), None, "{k}");
         }

@@ -268,16 +268,16 @@ impl Validate for MapMsg {
     }
 }
 
-/// A robot's GCN output for one tick, shared so peers can run the collective GRU.
-/// `embedding` is `None` when the robot does not see the worker this tick. `votes`
-/// says whether it will vote for the tick (it sees the worker, or its model set votes
-/// from its track of the worker while that is fresh); peers do not wait for the vote
-/// of a robot that will not. `worker`, `facing` and `landmarks` are
-/// what the robot knows in the floor frame (empty when it is not localised): the
-/// team fuses them into one worker track, one facing of the worker's body and one
-/// map of the stations. `verdict` is the robot's latest decision not shared before,
-/// in brief: peers measure how often the team agrees from it, so that no robot need
-/// hear every other robot's decision messages.
+/// A robot's share of one tick, one message: its GCN embedding, so peers can run the
+/// collective GRU (`None` when the robot does not see the worker this tick), and its
+/// vote (`None`: it does not vote for the tick, so peers do not wait for it). The vote
+/// is made from what the robot holds when its frame comes in: its own view of the
+/// tick and its peers' latest, so one exchange a tick carries both (engine.rs).
+/// `worker`, `facing` and `landmarks` are what the robot knows in the floor frame
+/// (empty when it is not localised): the team fuses them into one worker track, one
+/// facing of the worker's body and one map of the stations. `verdict` is the robot's
+/// latest decision not shared before, in brief: peers measure how often the team
+/// agrees from it, so that no robot need hear every other robot's decision messages.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EmbeddingMsg {
     pub robot: RobotId,
@@ -286,7 +286,8 @@ pub struct EmbeddingMsg {
     pub tick: u64,
     pub embedding: Option<Vec<f32>>,
     pub visibility: u32,
-    pub votes: bool,
+    /// Same robot, instance and tick as the message.
+    pub vote: Option<VoteMsg>,
     pub worker: Option<WorkerEstimate>,
     /// Where the robot's frame shows the worker's body facing this tick (radians,
     /// counter-clockwise from the floor's x axis); `None` when its frame does not show
@@ -318,6 +319,15 @@ impl Validate for EmbeddingMsg {
         }
         if let Some(v) = &self.verdict {
             sorted_voters("verdict.voters", &v.voters)?;
+        }
+        if let Some(v) = &self.vote {
+            v.validate()?;
+            if (&v.robot, v.instance, v.tick) != (&self.robot, self.instance, self.tick) {
+                return Err(invalid(
+                    "vote",
+                    format!("{}'s vote for tick {} in {}'s message of tick {}", v.robot, v.tick, self.robot, self.tick),
+                ));
+            }
         }
         Ok(())
     }

@@ -72,11 +72,13 @@ proptest! {
                              worker in prop::option::of((finite(), finite(), finite(), finite(), 0.01f32..10.0, -0.5f32..0.5, 1.0f32..10.0)),
                              facing in prop::option::of(finite()),
                              landmarks in prop::collection::vec((station(), finite(), finite(), 0.01f32..5.0), 0..8),
-                             verdict in prop::option::of((any::<u64>(), prop::option::of(station()), prop::collection::btree_set(robot(), 0..10), any::<u64>()))) {
+                             verdict in prop::option::of((any::<u64>(), prop::option::of(station()), prop::collection::btree_set(robot(), 0..10), any::<u64>())),
+                             vote in prop::option::of((steps(), 0.0f32..=1.0))) {
         let worker = worker.map(|(x, y, vx, vy, pp, pv, vv)| WorkerEstimate { position: [x, y], velocity: [vx, vy], covariance: [pp, pv * pp.sqrt(), vv] });
         let landmarks = landmarks.into_iter().map(|(station, x, y, sigma)| Landmark { station, position: [x, y], sigma }).collect();
         let verdict = verdict.map(|(tick, class, voters, digest)| Verdict { tick, class, voters: voters.into_iter().collect(), digest });
-        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, votes: visibility % 2 == 0, worker, facing, landmarks, verdict };
+        let vote = vote.map(|(steps, trust)| VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, trust, quality: 0.5, signature: vec![7; 64] });
+        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, vote, worker, facing, landmarks, verdict };
         prop_assert_eq!(decode::<EmbeddingMsg>(&encode(&m)).unwrap(), m);
     }
 

@@ -344,13 +344,11 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
                                 o.station_map.add(l, e.tick);
                             }
                             if let Some(w) = e.worker {
-                                o.estimates.insert(robot, (e.tick, w));
+                                o.estimates.insert(robot.clone(), (e.tick, w));
                             }
-                        }
-                    }
-                    Topic::Vote => {
-                        if let Ok(v) = decode_from::<VoteMsg>(&bytes, &robot) {
-                            o.votes.insert(robot, v);
+                            if let Some(v) = e.vote {
+                                o.votes.insert(robot, v);
+                            }
                         }
                     }
                     _ => {}

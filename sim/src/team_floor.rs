@@ -1,6 +1,8 @@
 //! What every robot of a fleet knows on the floor when each hears every other: each
 //! robot's [`FloorView`] fed its own frames, its peers' landmarks and the team's
-//! fused worker track and facing — what each engine holds when no message is lost. The
+//! fused worker track and facing — what each engine holds when no message is lost. As
+//! in the engine, a robot reads its peers' shares of the tick before (their estimates
+//! carried forward a tick), since it votes as soon as its own frame is in. The
 //! dataset export computes its training rows from it, and [`TeamFloor::warmed`] lets an
 //! evaluation start from the maps of a fleet that has worked on the floor before.
 //!
@@ -11,13 +13,24 @@
 
 use anyhow::Result;
 use spwi_agent::floor::{self, CameraCalibration, FloorView, Sighting, StationMap};
-use spwi_proto::{DetectionFrame, RobotId, WorkerEstimate};
+use spwi_proto::{DetectionFrame, Landmark, RobotId, WorkerEstimate};
 use spwi_world::layout::Layout;
 use spwi_world::world::{Scenario, World};
 
 #[derive(Clone)]
 pub struct TeamFloor {
     views: Vec<FloorView>,
+    /// What each robot shared in the last tick: what its peers read in this one.
+    shared: Vec<Option<Shared>>,
+}
+
+/// One robot's share of a tick, as its embedding message carries it.
+#[derive(Clone)]
+struct Shared {
+    tick: u64,
+    estimate: Option<WorkerEstimate>,
+    facing: Option<f32>,
+    landmarks: Vec<Landmark>,
 }
 
 /// What one robot holds of a tick, after [`TeamFloor::observe_heard`].
@@ -36,7 +49,7 @@ pub struct Heard {
 
 impl TeamFloor {
     pub fn new(camera: CameraCalibration, robots: usize) -> Self {
-        TeamFloor { views: vec![FloorView::new(camera); robots] }
+        TeamFloor { views: vec![FloorView::new(camera); robots], shared: vec![None; robots] }
     }
 
     /// One tick in which every robot hears every other: every robot's frame (by slot) in.
@@ -44,30 +57,48 @@ impl TeamFloor {
         self.observe_heard(frames, |_, _| true)
     }
 
-    /// One tick in which robot `listener` hears robot `speaker` only if
-    /// `hears(listener, speaker)`: each robot's map takes the landmarks it heard, and
-    /// its team track fuses its own estimate with the peers' it heard, leaving out one
-    /// most others contradict — as an engine does with the messages that reached it.
+    /// One tick in which robot `listener` heard robot `speaker`'s share of the tick
+    /// before only if `hears(listener, speaker)`: each robot's map takes the landmarks
+    /// it heard, and its team track fuses its own estimate with the peers' it heard
+    /// (carried forward to this tick), leaving out one most others contradict — as an
+    /// engine does with the messages that reached it by the time its frame came.
     pub fn observe_heard(&mut self, frames: &[DetectionFrame], hears: impl Fn(usize, usize) -> bool) -> Vec<Heard> {
-        let shared: Vec<_> = self.views.iter_mut().zip(frames).map(|(v, f)| v.observe(f)).collect();
-        let facings: Vec<Option<f32>> = self.views.iter().zip(frames).map(|(v, f)| v.camera().facing_in(f)).collect();
+        let now: Vec<Shared> = self
+            .views
+            .iter_mut()
+            .zip(frames)
+            .map(|(v, f)| {
+                let (estimate, landmarks) = v.observe(f);
+                Shared { tick: f.tick, estimate, facing: v.camera().facing_in(f), landmarks }
+            })
+            .collect();
         let mut heard = Vec::with_capacity(self.views.len());
         for (slot, view) in self.views.iter_mut().enumerate() {
-            let peers: Vec<usize> = (0..shared.len()).filter(|&p| p != slot && hears(slot, p)).collect();
-            for &p in &peers {
-                view.add_peer_landmarks(&shared[p].1, frames[p].tick);
+            let tick = now[slot].tick;
+            let peers: Vec<(usize, &Shared)> = (0..self.shared.len())
+                .filter(|&p| p != slot && hears(slot, p))
+                .filter_map(|p| Some((p, self.shared[p].as_ref()?)))
+                .collect();
+            for (_, s) in &peers {
+                view.add_peer_landmarks(&s.landmarks, s.tick);
             }
-            let own = shared[slot].0;
+            let carried: Vec<(usize, WorkerEstimate, Option<f32>)> = peers
+                .iter()
+                .filter_map(|(p, s)| {
+                    Some((*p, floor::track::predict(s.estimate.as_ref()?, tick.saturating_sub(s.tick)), s.facing))
+                })
+                .collect();
+            let own = now[slot].estimate;
             // (robot, sighting): ours first, as the engine orders them.
-            let (robots, sightings): (Vec<usize>, Vec<Sighting>) = std::iter::once(slot)
-                .chain(peers)
-                .filter_map(|r| shared[r].0.as_ref().map(|estimate| (r, Sighting { estimate, facing: facings[r] })))
-                .unzip();
+            let ours = own.as_ref().map(|estimate| (slot, Sighting { estimate, facing: now[slot].facing }));
+            let theirs = carried.iter().map(|(p, estimate, facing)| (*p, Sighting { estimate, facing: *facing }));
+            let (robots, sightings): (Vec<usize>, Vec<Sighting>) = ours.into_iter().chain(theirs).unzip();
             let team = floor::team_worker(&sightings, |_| true);
             let peers = team.kept_peers(&sightings, |i| robots[i] == slot).into_iter().copied().collect();
             view.observe_worker(own.as_ref(), team.track.as_ref());
             heard.push(Heard { own, team: team.track, peers, facing: team.facing });
         }
+        self.shared = now.into_iter().map(Some).collect();
         heard
     }
 
@@ -103,7 +134,7 @@ impl TeamFloor {
                 fresh
             })
             .collect();
-        Ok(TeamFloor { views })
+        Ok(TeamFloor { views, shared: vec![None; robots] })
     }
 }
 
@@ -128,6 +159,8 @@ mod tests {
         let mut world = World::new(layout, Scenario::Dynamic, 9, 4);
         let ids: Vec<RobotId> = (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect();
         let (mut fused_peers, mut shared_facings) = (0, 0);
+        // Each robot's estimate and facing (while it has an estimate) of the tick before.
+        let mut before: Vec<(Option<WorkerEstimate>, Option<f32>)> = vec![(None, None); 4];
         for _ in 0..100 {
             world.step();
             let frames: Vec<DetectionFrame> = ids.iter().enumerate().map(|(s, id)| world.observe(s, id)).collect();
@@ -144,13 +177,16 @@ mod tests {
                 };
                 assert!(same, "and its own facing: {:?} vs {:?}", h.facing, facing(slot));
             }
-            // Robot 0 hears robot 1 only: its peers are robot 1's estimate, fused with its own.
+            // Robot 0 hears robot 1 only: its peers are robot 1's estimate of the tick
+            // before, carried forward a tick, fused with its own of this tick.
             let h = half.observe_heard(&frames, |l, s| l != 0 || s == 1).remove(0);
-            assert_eq!(h.peers, own[1].into_iter().collect::<Vec<_>>());
-            assert_eq!(h.team, floor::fuse(own[0].iter().chain(&own[1])));
-            assert_eq!(h.facing, floor::fuse_facings([facing(0), facing(1)].into_iter().flatten()));
-            shared_facings += usize::from(facing(0).is_some() && facing(1).is_some());
+            let heard = before[1].0.map(|e| floor::track::predict(&e, 1));
+            assert_eq!(h.peers, heard.into_iter().collect::<Vec<_>>());
+            assert_eq!(h.team, floor::fuse(own[0].iter().chain(&heard)));
+            assert_eq!(h.facing, floor::fuse_facings([facing(0), before[1].1].into_iter().flatten()));
+            shared_facings += usize::from(facing(0).is_some() && before[1].1.is_some());
             fused_peers += h.peers.len();
+            before = (0..4).map(|s| (own[s], facing(s))).collect();
         }
         assert!(fused_peers > 20, "robot 1 should see the worker on some ticks: {fused_peers}");
         assert!(shared_facings > 10, "both robots should see the body's facing on some ticks: {shared_facings}");

@@ -85,33 +85,33 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
         collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(5)).await.unwrap();
 
         // One of each kind of bad input, on every key the agents read.
-        let good_vote = VoteMsg {
+        let good = EmbeddingMsg {
             robot: id("b"),
             instance: 1,
             tick: 1,
-            steps: vec![StepVote { class: Station::Workstation, confidence: 0.5 }],
+            embedding: None,
             visibility: 1,
-            trust: 1.0,
-            quality: 1.0,
-            signature: Vec::new(),
-        };
-        let mut wrong_version = encode(&good_vote);
-        wrong_version[0] = 99;
-        let mut truncated = encode(&scripted_frame(&ids[0], 0, 1));
-        truncated.truncate(truncated.len() / 2);
-        let nan_embedding = encode(&EmbeddingMsg {
-            robot: id("b"),
-            instance: 1,
-            tick: 1,
-            embedding: Some(vec![f32::NAN; EMBEDDING_DIM]),
-            visibility: 1,
-            votes: true,
+            vote: Some(VoteMsg {
+                robot: id("b"),
+                instance: 1,
+                tick: 1,
+                steps: vec![StepVote { class: Station::Workstation, confidence: 0.5 }],
+                visibility: 1,
+                trust: 1.0,
+                quality: 1.0,
+                signature: Vec::new(),
+            }),
             worker: None,
             facing: None,
             landmarks: vec![],
             verdict: None,
-        });
-        let spoofed = encode(&VoteMsg { robot: id("mallory"), ..good_vote.clone() });
+        };
+        let mut wrong_version = encode(&good);
+        wrong_version[0] = 99;
+        let mut truncated = encode(&scripted_frame(&ids[0], 0, 1));
+        truncated.truncate(truncated.len() / 2);
+        let nan_embedding = encode(&EmbeddingMsg { embedding: Some(vec![f32::NAN; EMBEDDING_DIM]), ..good.clone() });
+        let spoofed = encode(&EmbeddingMsg { robot: id("mallory"), vote: None, ..good });
         let bads: Vec<(&str, Vec<u8>)> = vec![
             ("garbage", vec![0xde, 0xad, 0xbe, 0xef]),
             ("empty", vec![]),
@@ -134,7 +134,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
         let tick1 = publisher.current_tick();
         let status = a.started.status.lock().unwrap().clone();
         let bad = status.transport.bad_total();
-        // a reads its own detections and everyone's embedding, vote and decision keys:
+        // a reads its own detections and everyone's embedding, ballots and map keys:
         // 7 bad payloads on 2 robots' keys for 3 topics + on its own detections.
         assert!(bad >= 7 * 7, "only {bad} bad messages counted: {:?}", status.transport.bad_messages);
         for reason in [

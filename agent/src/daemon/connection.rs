@@ -41,9 +41,9 @@ pub(super) struct Connection {
 
 impl Connection {
     /// Opens the session, refuses a robot id a live daemon holds, subscribes to what
-    /// it reads (its own detections and every robot's embeddings, votes, relayed
-    /// ballots and station maps; not the decisions, which are for observers: peers'
-    /// verdicts come inside their embeddings) and declares this robot's liveliness token.
+    /// it reads (its own detections and every robot's embedding messages, votes and
+    /// verdicts inside, relayed ballots and station maps; not the decisions, which are
+    /// for observers) and declares this robot's liveliness token.
     pub async fn open(zenoh: zenoh::Config, fleet: &FleetId, robot: &RobotId, queue: usize) -> Result<Connection> {
         let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
         let alive_key = keys::alive(fleet, robot);
@@ -55,7 +55,6 @@ impl Connection {
         for (key, topic) in [
             (keys::robot_topic(fleet, robot, Topic::Detections), Topic::Detections),
             (keys::all_robots(fleet, Topic::Embedding), Topic::Embedding),
-            (keys::all_robots(fleet, Topic::Vote), Topic::Vote),
             (keys::all_robots(fleet, Topic::Ballots), Topic::Ballots),
             (keys::all_robots(fleet, Topic::Map), Topic::Map),
         ] {

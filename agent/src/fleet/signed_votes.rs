@@ -37,11 +37,11 @@ impl SignedVotes {
         SignedVotes { creds, robot, known: BTreeMap::new(), own: None }
     }
 
-    /// Signs this robot's own votes in an output (its vote, and its vote among the
-    /// ballots it relays).
+    /// Signs this robot's own votes in an output (its vote in its share of a tick, and
+    /// its vote among the ballots it relays).
     pub fn sign(&mut self, out: &mut Output) {
         let own = match out {
-            Output::Vote(v) => std::slice::from_mut(v),
+            Output::Embedding(e) => e.vote.as_mut_slice(),
             Output::Ballots(b) => b.votes.as_mut_slice(),
             _ => return,
         };
@@ -63,9 +63,11 @@ impl SignedVotes {
     /// back or relayed back, is neither kept nor checked: the engine ignores it.
     pub fn check(&mut self, input: &mut Input) -> usize {
         match input {
-            Input::Vote(v) if v.robot != self.robot => {
-                let bytes = v.signed_bytes();
-                self.remember(v, bytes);
+            Input::Embedding(e) if e.robot != self.robot => {
+                if let Some(v) = &e.vote {
+                    let bytes = v.signed_bytes();
+                    self.remember(v, bytes);
+                }
                 0
             }
             Input::Ballots(b) => {
@@ -104,7 +106,7 @@ mod tests {
     use super::super::authority::ThrowawayFleet;
     use super::super::Role;
     use super::*;
-    use spwi_proto::{BallotsMsg, FleetId, Station, StepVote};
+    use spwi_proto::{BallotsMsg, EmbeddingMsg, FleetId, Station, StepVote};
 
     fn id(s: &str) -> RobotId {
         RobotId::new(s).unwrap()
@@ -130,11 +132,23 @@ mod tests {
         let creds = |r: &str| Arc::new(Credentials::load(&fleet.dir, r).unwrap());
         let (mut a, mut b) = (SignedVotes::new(creds("a"), id("a")), SignedVotes::new(creds("b"), id("b")));
         let c = || SignedVotes::new(creds("c"), id("c"));
+        let share = |v: VoteMsg| EmbeddingMsg {
+            robot: v.robot.clone(),
+            instance: v.instance,
+            tick: v.tick,
+            embedding: None,
+            visibility: 1,
+            vote: Some(v),
+            worker: None,
+            facing: None,
+            landmarks: Vec::new(),
+            verdict: None,
+        };
         let signed = |s: &mut SignedVotes, v: VoteMsg| {
-            let mut out = Output::Vote(v);
+            let mut out = Output::Embedding(share(v));
             s.sign(&mut out);
-            let Output::Vote(v) = out else { unreachable!() };
-            v
+            let Output::Embedding(e) = out else { unreachable!() };
+            e.vote.unwrap()
         };
         let from_a = signed(&mut a, vote("a", 5, 0.9));
         assert_eq!(from_a.signature.len(), 64);
@@ -158,7 +172,7 @@ mod tests {
         // Once a's vote is known (heard directly), a copy of it needs no verification;
         // anything else still does.
         let mut c = c();
-        assert_eq!(c.check(&mut Input::Vote(from_a.clone())), 0);
+        assert_eq!(c.check(&mut Input::Embedding(share(from_a.clone()))), 0);
         assert_eq!(c.check(&mut ballots(vec![vote("a", 5, 0.9)])), 0, "the very vote heard directly");
         assert_eq!(c.check(&mut ballots(vec![forged])), 1);
     }

@@ -142,6 +142,23 @@ pub fn fuse<'a>(estimates: impl IntoIterator<Item = &'a WorkerEstimate>) -> Opti
     })
 }
 
+/// An estimate carried `ticks` forward under the filter's motion model: a peer's
+/// estimate of an earlier tick, read for this one. Its uncertainty grows with the wait.
+pub fn predict(e: &WorkerEstimate, ticks: u64) -> WorkerEstimate {
+    if ticks == 0 {
+        return *e;
+    }
+    let [pp, pv, vv] = e.covariance;
+    let mut out = *e;
+    for k in 0..2 {
+        let mut axis = Axis { x: [e.position[k], e.velocity[k]], p: [[pp, pv], [pv, vv]] };
+        axis.predict(ticks as f32 * TICK_S, Q);
+        out.position[k] = axis.x[0];
+        out.covariance = [axis.p[0][0], axis.p[0][1], axis.p[1][1]]; // the same on both axes
+    }
+    out
+}
+
 /// Whether two estimates put the worker at the same place, given their uncertainty.
 pub fn same_place(a: &WorkerEstimate, b: &WorkerEstimate) -> bool {
     let d2 = (a.position[0] - b.position[0]).powi(2) + (a.position[1] - b.position[1]).powi(2);
@@ -240,6 +257,25 @@ mod tests {
         assert!(team.facing.is_some_and(|f| (f - 0.2).abs() < 1e-6), "{:?}: a's and b's only", team.facing);
         let unseen = team_worker(&[Sighting { estimate: &a, facing: None }], |_| true);
         assert_eq!((unseen.track, unseen.facing, unseen.agrees), (Some(a), None, None), "alone: its own track");
+    }
+
+    #[test]
+    fn a_peers_estimate_read_later_has_moved_on_and_grown_less_sure() {
+        let e = WorkerEstimate { position: [1.0, 2.0], velocity: [1.2, -0.4], covariance: [0.04, 0.01, 0.2] };
+        assert_eq!(predict(&e, 0), e);
+        let later = predict(&e, 2);
+        assert!((later.position[0] - 1.24).abs() < 1e-6 && (later.position[1] - 1.92).abs() < 1e-6, "{later:?}");
+        assert_eq!(later.velocity, e.velocity);
+        assert!(later.covariance[0] > e.covariance[0] && later.covariance[2] > e.covariance[2], "{later:?}");
+        // Carried forward as the filter itself would: the same as its own prediction.
+        let mut tr = Track::default();
+        for t in 0..10 {
+            tr.observe(t, truth(t), 0.1);
+        }
+        let (now, then) = (tr.estimate(9).unwrap(), tr.estimate(12).unwrap());
+        let carried = predict(&now, 3);
+        assert!(carried.position.iter().zip(then.position).all(|(a, b)| (a - b).abs() < 1e-5), "{carried:?} {then:?}");
+        assert!((carried.covariance[0] - then.covariance[0]).abs() < 1e-5);
     }
 
     /// A deterministic standard normal from a counter (Box–Muller over a hash).

@@ -125,7 +125,6 @@ impl Bus {
     fn broadcast(&mut self, from: usize, at: Duration, o: &Output) {
         let input = match o {
             Output::Embedding(e) => Input::Embedding(e.clone()),
-            Output::Vote(v) => Input::Vote(v.clone()),
             Output::Ballots(b) => Input::Ballots(b.clone()),
             // Robots read no decisions (peers' verdicts come in their embeddings).
             Output::Decision(_) => return,
