@@ -7,6 +7,7 @@
 //!
 //! ```text
 //! frame ─► graph ─► GCN ─► window row ─► GRU ─► Embedding out, our vote inside
+//!                                                (and Vote out alone, for observers)
 //!          (paper rows: own ‖ mean(peers) ‖ keypoints; relation rows: keypoints ‖
 //!           the worker's relations to the stations, from the team's fused track and
 //!           map; what peers shared is read as the latest each of them sent)
@@ -162,6 +163,8 @@ pub enum Input {
 pub enum Output {
     /// Our share of a tick, our vote inside.
     Embedding(EmbeddingMsg),
+    /// Our vote again, alone, for observers (peers read it in our share).
+    Vote(VoteMsg),
     Ballots(BallotsMsg),
     Decision(DecisionMsg),
     /// Our team map, for a robot that just joined.
@@ -508,7 +511,8 @@ impl Engine {
         let tick = self.open_tick(f.tick, now);
         tick.own_frame = Some(now);
         if let Some(v) = vote {
-            tick.votes.insert(me, v);
+            tick.votes.insert(me, v.clone());
+            out.push(Output::Vote(v));
         }
         self.advance(f.tick, now, out);
     }
@@ -918,9 +922,12 @@ pub(crate) mod tests {
         vec![StepVote { class, confidence: 1.0 }]
     }
 
-    /// Our vote, in our share of the tick.
+    /// Our vote, in our share of the tick (and the same alone, for observers).
     fn take_vote(out: &[Output]) -> VoteMsg {
-        take_embedding(out).vote.expect("a vote")
+        let v = take_embedding(out).vote.expect("a vote");
+        let alone = out.iter().find_map(|o| if let Output::Vote(v) = o { Some(v) } else { None });
+        assert_eq!(alone, Some(&v), "the vote goes out alone too, for observers");
+        v
     }
 
     fn take_embedding(out: &[Output]) -> EmbeddingMsg {
@@ -951,6 +958,7 @@ pub(crate) mod tests {
         let out = e.handle(Input::Frame(frame("a", 1, false)), ms(0));
         let e = take_embedding(&out);
         assert_eq!((e.embedding, e.vote), (None, None));
+        assert!(out.iter().all(|o| !matches!(o, Output::Vote(_))));
         assert!(decisions(&out)[0].steps.is_empty());
     }
 

@@ -14,7 +14,7 @@
 //! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/ballots`, `/spwi/in/map` | a received message |
 //! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (JSON) |
 //! | `/spwi/in/poll` | empty: time passed |
-//! | `/spwi/out/embedding`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map` | a published message |
+//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map` | a published message |
 //! | `/spwi/state` | after each decision, whom the robot trusts and whose feed it sets aside ([`PeerState`], JSON) |
 //!
 //! Log and publish times are nanoseconds of engine time (since the daemon started).
@@ -91,6 +91,7 @@ enum Channel {
     InMembership,
     InPoll,
     OutEmbedding,
+    OutVote,
     OutBallots,
     OutDecision,
     OutMap,
@@ -98,7 +99,7 @@ enum Channel {
 }
 
 impl Channel {
-    const ALL: [Channel; 12] = [
+    const ALL: [Channel; 13] = [
         Channel::Config,
         Channel::InDetections,
         Channel::InEmbedding,
@@ -107,6 +108,7 @@ impl Channel {
         Channel::InMembership,
         Channel::InPoll,
         Channel::OutEmbedding,
+        Channel::OutVote,
         Channel::OutBallots,
         Channel::OutDecision,
         Channel::OutMap,
@@ -123,6 +125,7 @@ impl Channel {
             Channel::InMembership => "/spwi/in/membership",
             Channel::InPoll => "/spwi/in/poll",
             Channel::OutEmbedding => "/spwi/out/embedding",
+            Channel::OutVote => "/spwi/out/vote",
             Channel::OutBallots => "/spwi/out/ballots",
             Channel::OutDecision => "/spwi/out/decision",
             Channel::OutMap => "/spwi/out/map",
@@ -190,6 +193,7 @@ impl Recorder {
     pub fn output(&mut self, output: &Output, now: Duration) -> Result<()> {
         match output {
             Output::Embedding(m) => self.write(Channel::OutEmbedding, now, &encode(m)),
+            Output::Vote(m) => self.write(Channel::OutVote, now, &encode(m)),
             Output::Ballots(m) => self.write(Channel::OutBallots, now, &encode(m)),
             Output::Decision(m) => self.write(Channel::OutDecision, now, &encode(m)),
             Output::Map(m) => self.write(Channel::OutMap, now, &encode(m)),
@@ -247,6 +251,7 @@ pub fn read(path: &Path) -> Result<Recording> {
             }
             Some(Channel::InPoll) => inputs.push((now, Input::Poll)),
             Some(Channel::OutEmbedding) => outputs.push(Output::Embedding(decode(d).with_context(ctx)?)),
+            Some(Channel::OutVote) => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
             Some(Channel::OutBallots) => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
             Some(Channel::OutDecision) => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
             Some(Channel::OutMap) => outputs.push(Output::Map(decode(d).with_context(ctx)?)),

@@ -16,7 +16,7 @@ use serde::Serialize;
 /// the ballot digest in the decision; 4: the voter's standing and view quality in the
 /// vote; 5: the voter's signature; 6: the worker's facing in the embedding message;
 /// 7: the robot's latest verdict in the embedding message; 8: the vote in the embedding
-/// message, no vote topic).
+/// message, which robots read it from).
 pub const PROTOCOL_VERSION: u16 = 8;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is

@@ -4,6 +4,7 @@
 //! |------------------------------------------|---------------------------------|----------------|
 //! | `spwi/<fleet>/robot/<robot>/detections`  | [`DetectionFrame`]              | world / detector node |
 //! | `spwi/<fleet>/robot/<robot>/embedding`   | [`EmbeddingMsg`] (and the vote) | agent          |
+//! | `spwi/<fleet>/robot/<robot>/vote`        | [`VoteMsg`] (for observers)     | agent          |
 //! | `spwi/<fleet>/robot/<robot>/decision`    | [`DecisionMsg`] (for observers) | agent          |
 //! | `spwi/<fleet>/robot/<robot>/ballots`     | [`BallotsMsg`] (relayed votes)  | agent          |
 //! | `spwi/<fleet>/robot/<robot>/map`         | [`MapMsg`] (when a robot joins) | agent          |
@@ -12,6 +13,7 @@
 //!
 //! [`DetectionFrame`]: crate::DetectionFrame
 //! [`EmbeddingMsg`]: crate::EmbeddingMsg
+//! [`VoteMsg`]: crate::VoteMsg
 //! [`DecisionMsg`]: crate::DecisionMsg
 //! [`BallotsMsg`]: crate::BallotsMsg
 //! [`MapMsg`]: crate::MapMsg
@@ -26,18 +28,21 @@ const ROOT: &str = "spwi";
 pub enum Topic {
     Detections,
     Embedding,
+    Vote,
     Decision,
     Ballots,
     Map,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 5] = [Topic::Detections, Topic::Embedding, Topic::Decision, Topic::Ballots, Topic::Map];
+    pub const ALL: [Topic; 6] =
+        [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Ballots, Topic::Map];
 
     pub fn as_str(self) -> &'static str {
         match self {
             Topic::Detections => "detections",
             Topic::Embedding => "embedding",
+            Topic::Vote => "vote",
             Topic::Decision => "decision",
             Topic::Ballots => "ballots",
             Topic::Map => "map",
@@ -137,7 +142,6 @@ mod tests {
             "spwi/f2/robot/r/ballots",
             "spwi/f1/robot/r/ballots/extra",
             "spwi/f1/robot/r/other",
-            "spwi/f1/robot/r/vote", // protocol 7's votes ride in the embedding message now
             "spwi/f1/robots/r/ballots",
             "xx/f1/robot/r/ballots",
             "spwi/f1/robot/*/ballots",

@@ -272,7 +272,8 @@ impl Validate for MapMsg {
 /// collective GRU (`None` when the robot does not see the worker this tick), and its
 /// vote (`None`: it does not vote for the tick, so peers do not wait for it). The vote
 /// is made from what the robot holds when its frame comes in: its own view of the
-/// tick and its peers' latest, so one exchange a tick carries both (engine.rs).
+/// tick and its peers' latest, so one exchange a tick carries both (engine.rs). The
+/// vote also goes out alone on the vote key, for observers.
 /// `worker`, `facing` and `landmarks` are what the robot knows in the floor frame
 /// (empty when it is not localised): the team fuses them into one worker track, one
 /// facing of the worker's body and one map of the stations. `verdict` is the robot's

@@ -108,7 +108,8 @@ async fn open(config: zenoh::Config, who: &str) -> zenoh::Session {
 }
 
 /// Acts as `robot` for `period`: holds its liveliness token and puts a valid embedding
-/// message with a vote, a decision and a detection frame under its keys every tick.
+/// message with a vote, the vote alone, a decision and a detection frame under its keys
+/// every tick.
 async fn impersonate(session: zenoh::Session, fleet: FleetId, robot: RobotId, period: Duration) {
     let (fleet, robot) = (&fleet, &robot);
     let _token = session.liveliness().declare_token(keys::alive(fleet, robot)).await.unwrap();
@@ -151,6 +152,7 @@ async fn impersonate(session: zenoh::Session, fleet: FleetId, robot: RobotId, pe
         };
         let messages = [
             (Topic::Embedding, encode(&share)),
+            (Topic::Vote, encode(&VoteMsg { tick, ..vote.clone() })),
             (Topic::Decision, encode(&decision)),
             (Topic::Detections, encode(&frame)),
         ];
@@ -333,7 +335,7 @@ async fn a_member_cannot_speak_for_another_robot() {
             seen.iter().filter(|k| **k == keys::robot_topic(&fleet, &id(robot), topic)).count()
         };
         assert!(from("r3", Topic::Embedding) > 0, "r3's own votes were refused too: the test proves nothing");
-        for topic in [Topic::Embedding, Topic::Decision, Topic::Detections, Topic::Ballots] {
+        for topic in [Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Detections, Topic::Ballots] {
             assert_eq!(from("r2", topic), 0, "a message on r2's {} reached the hub", topic.as_str());
         }
         // r1 counts itself and r3 (whose own token is its right), never r2.

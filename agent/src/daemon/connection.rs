@@ -42,8 +42,8 @@ pub(super) struct Connection {
 impl Connection {
     /// Opens the session, refuses a robot id a live daemon holds, subscribes to what
     /// it reads (its own detections and every robot's embedding messages, votes and
-    /// verdicts inside, relayed ballots and station maps; not the decisions, which are
-    /// for observers) and declares this robot's liveliness token.
+    /// verdicts inside, relayed ballots and station maps; not the votes alone nor the
+    /// decisions, which are for observers) and declares this robot's liveliness token.
     pub async fn open(zenoh: zenoh::Config, fleet: &FleetId, robot: &RobotId, queue: usize) -> Result<Connection> {
         let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
         let alive_key = keys::alive(fleet, robot);

@@ -221,7 +221,7 @@ fn decode_input(topic: Topic, robot: &RobotId, bytes: &[u8]) -> Result<Input, De
     Ok(match topic {
         Topic::Detections => Input::Frame(decode_from(bytes, robot)?),
         Topic::Embedding => Input::Embedding(decode_from(bytes, robot)?),
-        Topic::Decision => unreachable!("the connection subscribes to no decisions"),
+        Topic::Vote | Topic::Decision => unreachable!("the connection subscribes to no votes alone, no decisions"),
         Topic::Ballots => Input::Ballots(decode_from(bytes, robot)?),
         Topic::Map => Input::Map(decode_from(bytes, robot)?),
     })

@@ -42,6 +42,7 @@ impl Outbox {
         };
         let publishers = Publishers {
             embedding: declare(Topic::Embedding).await.map_err(|e| anyhow!(e))?,
+            vote: declare(Topic::Vote).await.map_err(|e| anyhow!(e))?,
             decision: declare(Topic::Decision).await.map_err(|e| anyhow!(e))?,
             ballots: declare(Topic::Ballots).await.map_err(|e| anyhow!(e))?,
             // Sent once when a robot joins, useful for longer than a tick: reliable.
@@ -64,6 +65,7 @@ impl Outbox {
     pub fn publish(&self, output: &Output) -> bool {
         let message = match output {
             Output::Embedding(m) => (Topic::Embedding, encode(m)),
+            Output::Vote(m) => (Topic::Vote, encode(m)),
             Output::Ballots(m) => (Topic::Ballots, encode(m)),
             Output::Decision(m) => (Topic::Decision, encode(m)),
             Output::Map(m) => (Topic::Map, encode(m)),
@@ -93,6 +95,7 @@ impl Outbox {
 /// This robot's publishers, one per topic it speaks on.
 struct Publishers {
     embedding: zenoh::pubsub::Publisher<'static>,
+    vote: zenoh::pubsub::Publisher<'static>,
     decision: zenoh::pubsub::Publisher<'static>,
     ballots: zenoh::pubsub::Publisher<'static>,
     map: zenoh::pubsub::Publisher<'static>,
@@ -105,6 +108,7 @@ impl Publishers {
         while let Some((topic, bytes)) = rx.blocking_recv() {
             let publisher = match topic {
                 Topic::Embedding => &self.embedding,
+                Topic::Vote => &self.vote,
                 Topic::Decision => &self.decision,
                 Topic::Ballots => &self.ballots,
                 Topic::Map => &self.map,

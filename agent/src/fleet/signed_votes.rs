@@ -37,11 +37,12 @@ impl SignedVotes {
         SignedVotes { creds, robot, known: BTreeMap::new(), own: None }
     }
 
-    /// Signs this robot's own votes in an output (its vote in its share of a tick, and
-    /// its vote among the ballots it relays).
+    /// Signs this robot's own votes in an output (its vote in its share of a tick, the
+    /// same vote alone for observers, and its vote among the ballots it relays).
     pub fn sign(&mut self, out: &mut Output) {
         let own = match out {
             Output::Embedding(e) => e.vote.as_mut_slice(),
+            Output::Vote(v) => std::slice::from_mut(v),
             Output::Ballots(b) => b.votes.as_mut_slice(),
             _ => return,
         };
@@ -157,6 +158,9 @@ mod tests {
         a.sign(&mut again);
         let Output::Ballots(relayed_by_a) = again else { unreachable!() };
         assert_eq!(relayed_by_a.votes[0], from_a, "the vote relayed is signed as the vote sent");
+        let mut alone = Output::Vote(vote("a", 5, 0.9));
+        a.sign(&mut alone);
+        assert_eq!(alone, Output::Vote(from_a.clone()), "and so is the copy for observers");
 
         // b relays a's vote faithfully, a forged one, an unsigned one, and its own unsigned vote.
         let forged = VoteMsg { steps: vec![StepVote { class: Station::Assembly, confidence: 0.9 }], ..from_a.clone() };

@@ -126,8 +126,9 @@ impl Bus {
         let input = match o {
             Output::Embedding(e) => Input::Embedding(e.clone()),
             Output::Ballots(b) => Input::Ballots(b.clone()),
-            // Robots read no decisions (peers' verdicts come in their embeddings).
-            Output::Decision(_) => return,
+            // Robots read neither votes alone nor decisions: both come in their
+            // peers' embedding messages (the vote, the verdict).
+            Output::Vote(_) | Output::Decision(_) => return,
             Output::Map(m) => Input::Map(m.clone()),
         };
         for to in 0..self.engines.len() {

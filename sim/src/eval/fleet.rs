@@ -1,8 +1,9 @@
 //! The evaluation's fleet: one held-out episode, N real engines (the daemon's
 //! `Engine`, with the daemon's default timing) on a virtual clock behind the in-memory
 //! [`Bus`] and its fault model, as fast as the CPU goes. Each tick the world delivers
-//! every live robot's frame; the engines exchange embeddings, votes and decisions over
-//! the bus, and what they publish — each robot's vote and team decision — is scored.
+//! every live robot's frame; the engines exchange their shares of the tick (embedding
+//! and vote in one message), relayed ballots and maps over the bus, and what they
+//! publish — each robot's vote and team decision — is scored.
 //! The ego-GRU and the baselines run as [`Observers`] beside them.
 
 use super::bus::{Bus, Net};
@@ -541,6 +542,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
 fn encoded_len(o: &Output) -> usize {
     match o {
         Output::Embedding(m) => encode(m).len(),
+        Output::Vote(m) => encode(m).len(),
         Output::Ballots(m) => encode(m).len(),
         Output::Decision(m) => encode(m).len(),
         Output::Map(m) => encode(m).len(),
