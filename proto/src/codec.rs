@@ -59,7 +59,7 @@ macro_rules! message {
 }
 message!(DetectionFrame, "detections", robot);
 message!(EmbeddingMsg, "embedding", robot);
-// A vote travels inside embedding and ballots messages; alone it is encoded to be signed.
+// A vote travels inside embedding and ballots messages, and alone for observers.
 message!(VoteMsg, "vote", robot);
 message!(DecisionMsg, "decision", robot);
 message!(BallotsMsg, "ballots", robot);

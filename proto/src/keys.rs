@@ -131,7 +131,7 @@ mod tests {
             let k = robot_topic(&f, &r, t);
             assert_eq!(parse_robot_topic(&f, &k), Some((r.clone(), t)));
         }
-        assert_eq!(robot_topic(&f, &r, Topic::Ballots), "spwi/f1/robot/r-2/ballots");
+        assert_eq!(robot_topic(&f, &r, Topic::Vote), "spwi/f1/robot/r-2/vote");
         assert_eq!(all_robots(&f, Topic::Embedding), "spwi/f1/robot/*/embedding");
     }
 
@@ -139,12 +139,12 @@ mod tests {
     fn foreign_or_malformed_keys_are_not_parsed() {
         let (f, _) = ids();
         for k in [
-            "spwi/f2/robot/r/ballots",
-            "spwi/f1/robot/r/ballots/extra",
+            "spwi/f2/robot/r/vote",
+            "spwi/f1/robot/r/vote/extra",
             "spwi/f1/robot/r/other",
-            "spwi/f1/robots/r/ballots",
-            "xx/f1/robot/r/ballots",
-            "spwi/f1/robot/*/ballots",
+            "spwi/f1/robots/r/vote",
+            "xx/f1/robot/r/vote",
+            "spwi/f1/robot/*/vote",
         ] {
             assert_eq!(parse_robot_topic(&f, k), None, "{k}");
         }

@@ -344,11 +344,13 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
                                 o.station_map.add(l, e.tick);
                             }
                             if let Some(w) = e.worker {
-                                o.estimates.insert(robot.clone(), (e.tick, w));
+                                o.estimates.insert(robot, (e.tick, w));
                             }
-                            if let Some(v) = e.vote {
-                                o.votes.insert(robot, v);
-                            }
+                        }
+                    }
+                    Topic::Vote => {
+                        if let Ok(v) = decode_from::<VoteMsg>(&bytes, &robot) {
+                            o.votes.insert(robot, v);
                         }
                     }
                     _ => {}

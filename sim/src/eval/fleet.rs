@@ -411,13 +411,11 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             messages += 1;
             bytes += encoded_len(out);
             match out {
-                Output::Embedding(e) if e.tick == tick => {
-                    embeddings[slot] = e.embedding.clone();
-                    if let Some(v) = &e.vote {
-                        votes[slot] = Some(v.steps.iter().map(|s| s.class).collect());
-                        vote_trust[slot].0 += f64::from(v.trust);
-                        vote_trust[slot].1 += 1;
-                    }
+                Output::Embedding(e) if e.tick == tick => embeddings[slot] = e.embedding.clone(),
+                Output::Vote(v) if v.tick == tick => {
+                    votes[slot] = Some(v.steps.iter().map(|s| s.class).collect());
+                    vote_trust[slot].0 += f64::from(v.trust);
+                    vote_trust[slot].1 += 1;
                 }
                 Output::Decision(d) if d.tick == tick => {
                     decided[slot] = Some(d.steps.iter().map(|s| s.class).collect())
