@@ -55,7 +55,7 @@
 
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
-use crate::floor::{self, CameraCalibration, FloorView, Sighting, StationMap, RELATION_DIM};
+use crate::floor::{self, CameraCalibration, FloorView, StationMap, RELATION_DIM};
 use crate::graph::{GraphBuilder, OnFloor};
 use crate::metrics::{Metrics, Stage};
 use crate::model::Inference;
@@ -654,15 +654,9 @@ impl Engine {
         // the others contradict is left out of the team's track and counts against its
         // robot's trust; so do peers we have learned to doubt.
         let me = &self.cfg.robot;
-        let predicted: Vec<(&RobotId, WorkerEstimate, Option<f32>)> = peers
-            .iter()
-            .filter_map(|(r, v)| {
-                Some((*r, floor::track::predict(v.worker.as_ref()?, t.saturating_sub(v.tick)), v.facing))
-            })
-            .collect();
-        let ours = own.worker.as_ref().map(|estimate| (me, Sighting { estimate, facing: own.facing }));
-        let theirs = predicted.iter().map(|(r, estimate, facing)| (*r, Sighting { estimate, facing: *facing }));
-        let (robots, sightings): (Vec<&RobotId>, Vec<Sighting>) = ours.into_iter().chain(theirs).unzip();
+        let theirs = peers.iter().map(|(r, v)| (*r, v.tick, v.worker, v.facing));
+        let held = floor::held_at(t, own.worker.map(|w| (me, w, own.facing)), theirs);
+        let (robots, sightings) = floor::sightings(&held);
         let trust = &self.trust;
         let team = floor::team_worker(&sightings, |i| robots[i] == me || trust.fuses(robots[i]));
         // A peer-set model also reads each fused peer's own estimate.

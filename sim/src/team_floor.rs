@@ -12,7 +12,7 @@
 //! seconds on a new floor, which is a different question.
 
 use anyhow::Result;
-use spwi_agent::floor::{self, CameraCalibration, FloorView, Sighting, StationMap};
+use spwi_agent::floor::{self, CameraCalibration, FloorView, StationMap};
 use spwi_proto::{DetectionFrame, Landmark, RobotId, WorkerEstimate};
 use spwi_world::layout::Layout;
 use spwi_world::world::{Scenario, World};
@@ -82,17 +82,10 @@ impl TeamFloor {
             for (_, s) in &peers {
                 view.add_peer_landmarks(&s.landmarks, s.tick);
             }
-            let carried: Vec<(usize, WorkerEstimate, Option<f32>)> = peers
-                .iter()
-                .filter_map(|(p, s)| {
-                    Some((*p, floor::track::predict(s.estimate.as_ref()?, tick.saturating_sub(s.tick)), s.facing))
-                })
-                .collect();
             let own = now[slot].estimate;
-            // (robot, sighting): ours first, as the engine orders them.
-            let ours = own.as_ref().map(|estimate| (slot, Sighting { estimate, facing: now[slot].facing }));
-            let theirs = carried.iter().map(|(p, estimate, facing)| (*p, Sighting { estimate, facing: *facing }));
-            let (robots, sightings): (Vec<usize>, Vec<Sighting>) = ours.into_iter().chain(theirs).unzip();
+            let theirs = peers.iter().map(|(p, s)| (*p, s.tick, s.estimate, s.facing));
+            let held = floor::held_at(tick, own.map(|e| (slot, e, now[slot].facing)), theirs);
+            let (robots, sightings) = floor::sightings(&held);
             let team = floor::team_worker(&sightings, |_| true);
             let peers = team.kept_peers(&sightings, |i| robots[i] == slot).into_iter().copied().collect();
             view.observe_worker(own.as_ref(), team.track.as_ref());

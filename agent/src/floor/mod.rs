@@ -22,7 +22,7 @@ pub mod track;
 pub use calibration::CameraCalibration;
 pub use relations::{facing, fuse_facings, peer_set, relations, FACING_DIM, RELATION_DIM};
 pub use stations::StationMap;
-pub use track::{agrees_with_most, fuse, team_worker, Sighting, TeamWorker, Track};
+pub use track::{agrees_with_most, fuse, held_at, sightings, team_worker, Sighting, TeamWorker, Track};
 
 use spwi_proto::{DetectionFrame, Landmark, WorkerEstimate};
 

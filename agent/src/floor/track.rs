@@ -188,6 +188,26 @@ pub struct Sighting<'a> {
     pub facing: Option<f32>,
 }
 
+/// The estimates a robot holds for `tick`, its own first — the order in which the
+/// engine and the training rows alike hand them to [`team_worker`]: its own of the
+/// tick, then each peer's latest share (of the tick given with it) carried forward to
+/// `tick` ([`predict`]). Each comes with whose it is and the facing that robot saw.
+pub fn held_at<R>(
+    tick: u64,
+    own: Option<(R, WorkerEstimate, Option<f32>)>,
+    peers: impl IntoIterator<Item = (R, u64, Option<WorkerEstimate>, Option<f32>)>,
+) -> Vec<(R, WorkerEstimate, Option<f32>)> {
+    let carried = peers
+        .into_iter()
+        .filter_map(|(r, then, estimate, facing)| Some((r, predict(&estimate?, tick.saturating_sub(then)), facing)));
+    own.into_iter().chain(carried).collect()
+}
+
+/// The [`Sighting`]s of estimates [`held_at`] a tick, and whose each is.
+pub fn sightings<R: Copy>(held: &[(R, WorkerEstimate, Option<f32>)]) -> (Vec<R>, Vec<Sighting<'_>>) {
+    held.iter().map(|(r, estimate, facing)| (*r, Sighting { estimate, facing: *facing })).unzip()
+}
+
 /// The team's worker for one tick, from the robots' [`Sighting`]s.
 #[derive(Debug, Clone)]
 pub struct TeamWorker {
@@ -276,6 +296,19 @@ mod tests {
         let carried = predict(&now, 3);
         assert!(carried.position.iter().zip(then.position).all(|(a, b)| (a - b).abs() < 1e-5), "{carried:?} {then:?}");
         assert!((carried.covariance[0] - then.covariance[0]).abs() < 1e-5);
+    }
+
+    #[test]
+    fn a_robot_holds_its_own_estimate_first_and_its_peers_latest_carried_to_the_tick() {
+        let at = |x: f32| WorkerEstimate { position: [x, 0.0], velocity: [1.0, 0.0], covariance: [0.04, 0.0, 0.2] };
+        let peers = [("b", 9, Some(at(3.0)), Some(0.5)), ("c", 10, None, Some(1.0)), ("d", 10, Some(at(7.0)), None)];
+        let held = held_at(10, Some(("a", at(5.0), None)), peers);
+        let order: Vec<&str> = held.iter().map(|h| h.0).collect();
+        assert_eq!(order, ["a", "b", "d"], "ours first; a peer without an estimate holds none");
+        assert_eq!(held[1], ("b", predict(&at(3.0), 1), Some(0.5)), "b's of tick 9, a tick on");
+        assert_eq!(held[2], ("d", at(7.0), None), "d's of this very tick, as it is");
+        let (robots, sightings) = sightings(&held);
+        assert_eq!((robots, sightings[1].estimate, sightings[1].facing), (order, &held[1].1, Some(0.5)));
     }
 
     /// A deterministic standard normal from a counter (Box–Muller over a hash).
