@@ -118,7 +118,8 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
     (with `relations`, ego and collective rows end with the relation block, and with
     `facing` then the facing block).
 
-    Collective peers: at evaluation (peer_rng None) every other robot of the episode;
+    Collective peers (their shares of the tick before): at evaluation (peer_rng None)
+    every other robot of the episode;
     in training a random subset of 0..R-1 of them (0 with a small probability, so the
     model also works alone), each missing on a tick with probability `peer_drop`.
     """
@@ -144,8 +145,11 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
     if kind == "cnn1d":
         return (torch.cat([seqs.feature[E, tt, R] * v, kp], -1),), labels
     assert kind == "collective"
-    all_emb = seqs.emb[E, tt]  # [B, F, R, 128]
-    present = seqs.seen[E, tt].float() * v  # [B, F, R]
+    # Each peer's share of the tick before, as the daemon holds it when it votes on its
+    # own frame (agent/src/engine.rs, `vote`); nothing before the first tick.
+    tp = tt - 1
+    all_emb = seqs.emb[E, tp.clamp(min=0)]  # [B, F, R, 128]
+    present = seqs.seen[E, tp.clamp(min=0)].float() * v * (tp >= 0)[..., None].float()  # [B, F, R]
     others = torch.ones(len(e), seqs.robots)
     others[torch.arange(len(e)), r] = 0
     if peer_rng is not None:
