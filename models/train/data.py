@@ -147,9 +147,9 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
     assert kind == "collective"
     # Each peer's share of the tick before, as the daemon holds it when it votes on its
     # own frame (agent/src/engine.rs, `vote`); nothing before the first tick.
-    tp = tt - 1
-    all_emb = seqs.emb[E, tp.clamp(min=0)]  # [B, F, R, 128]
-    present = seqs.seen[E, tp.clamp(min=0)].float() * v * (tp >= 0)[..., None].float()  # [B, F, R]
+    before, had = (tt - 1).clamp(min=0), (tt > 0)[..., None].float()
+    all_emb = seqs.emb[E, before]  # [B, F, R, 128]
+    present = seqs.seen[E, before].float() * v * had  # [B, F, R]
     others = torch.ones(len(e), seqs.robots)
     others[torch.arange(len(e)), r] = 0
     if peer_rng is not None:
