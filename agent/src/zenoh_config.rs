@@ -8,15 +8,17 @@
 //! own lease is what counts: every robot must run the same one.
 //!
 //! It also gives each link's data queue [`DATA_QUEUE_BATCHES`] batches instead of
-//! Zenoh's 2. A robot's tick ends in a burst of express messages (vote, relayed
-//! ballots, decision), each taking a batch of its own, and Zenoh drops a message that
-//! finds no free batch within 1 ms: on a busy host, where the link's sending task is
-//! not scheduled that soon, two batches lose the third message. Measured with the soak
-//! (8 agents, two CPU hogs beside them): 57 and 75 of 950 settled ticks missing a
-//! decision with 2 batches, 0 and 0 with 8 (docs/BENCHMARKS.md, "Soak").
+//! Zenoh's 2. A robot's tick ends in a burst of messages (its share, relayed ballots,
+//! decision), and Zenoh drops a message that finds no free batch within 1 ms: on a
+//! busy host, where the link's sending task is not scheduled that soon, two batches
+//! lost the third message while each was express, in a batch of its own. Measured
+//! with the soak (8 agents, two CPU hogs beside them): 57 and 75 of 950 settled ticks
+//! missing a decision with 2 batches, 0 and 0 with 8 (docs/BENCHMARKS.md, "Soak").
+//! Since the messages are no longer express they share a batch when the link lags
+//! (`daemon/publishing.rs`), so they need fewer; the margin stays.
 //!
 //! A router carries every client's burst on each of its links: with 16 robots as its
-//! clients, a tick puts some fifty express messages on every outgoing link at once. So
+//! clients, a tick puts some fifty messages on every outgoing link at once. So
 //! [`build_router`] gives its links Zenoh's largest data queue ([`ROUTER_DATA_QUEUE_BATCHES`])
 //! and lets a message wait up to [`ROUTER_WAIT_BEFORE_DROP_US`] for a free batch instead of
 //! 1 ms: 16 robots as clients of one router on a busy 2-core host lost a robot's

@@ -28,16 +28,20 @@ pub(super) struct Outbox {
 
 impl Outbox {
     /// Declares this robot's publishers and starts the thread that drives them.
-    /// Express: each message leaves at once, no batching. Best effort: a message is
-    /// worth something only within its tick, so on a link of mixed reliability (QUIC
-    /// with `mixed_rel=1`, deploy/README.md) it goes as a datagram, and a lost packet
-    /// loses that message (the ballot relay covers it) instead of holding up every
-    /// later one until it is resent. On TCP and TLS links nothing changes.
+    /// Not express: a message still leaves as soon as the link's sending task runs,
+    /// but what queues behind it meanwhile (the rest of this robot's tick; on a
+    /// router, the other robots' shares it forwards on the same link) leaves in the
+    /// same batch, one write and one read instead of one each (docs/BENCHMARKS.md,
+    /// "Batched, not express"). Best effort: a message is worth something only within
+    /// its tick, so on a link of mixed reliability (QUIC with `mixed_rel=1`,
+    /// deploy/README.md) it goes as a datagram, and a lost packet loses the messages of
+    /// that batch (the ballot relays cover the votes) instead of holding up every later
+    /// one until it is resent. On TCP and TLS links nothing changes.
     pub async fn start(session: &zenoh::Session, fleet: &FleetId, robot: &RobotId) -> Result<Outbox> {
         let declare = |t: Topic| {
             session
                 .declare_publisher(keys::robot_topic(fleet, robot, t))
-                .express(true)
+                .express(false)
                 .reliability(zenoh::qos::Reliability::BestEffort)
         };
         let publishers = Publishers {
