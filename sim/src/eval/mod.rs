@@ -6,7 +6,8 @@
 //! - `bus.rs`: the engines' network (delay, loss, leaving robots), deadlines as polls;
 //! - `observers.rs`: the ego-GRU and the baselines; `cvm.rs`: the constant-velocity model;
 //! - `fleet.rs`: one episode — the world's frames in, the engines' votes and decisions scored;
-//! - `score.rs`: tallies, accuracies and their intervals; `studies.rs`: `--all` and docs/RESULTS.md;
+//! - `score.rs`: tallies, accuracies and their intervals; `studies.rs`: `--all` and docs/RESULTS.md,
+//!   `reading.rs`: that page's reading of the targets and of what bounds them;
 //! - `command.rs`: the command line of `spwi-sim eval`;
 //!   `plots.rs`: the PNG figures of `--plots`.
 //!
@@ -24,6 +25,7 @@ pub mod cvm;
 pub mod fleet;
 pub mod observers;
 pub mod plots;
+pub mod reading;
 pub mod score;
 pub mod studies;
 
@@ -177,6 +179,9 @@ pub struct PhaseAccuracy {
     /// Share of the ticks it is one kind of: all ticks for a phase, the long walks' for
     /// a route.
     pub share: f64,
+    /// Share of all the collective's predictions that fall in it: its errors here cost
+    /// the collective's accuracy this share of them.
+    pub collective_share: f64,
     pub collective: Accuracy,
     pub ego: Accuracy,
     pub cvm: Accuracy,
@@ -283,6 +288,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         |name: &'static str, of_ticks: u64, pick: &dyn Fn(&fleet::Tallies) -> &fleet::PhaseTallies| PhaseAccuracy {
             phase: name,
             share: pick(&all).ticks as f64 / of_ticks.max(1) as f64,
+            collective_share: pick(&all).collective.samples() as f64 / all.collective.samples().max(1) as f64,
             collective: of(&|e| &pick(e).collective),
             ego: of(&|e| &pick(e).ego),
             cvm: of(&|e| &pick(e).cvm),
@@ -628,6 +634,25 @@ mod tests {
             assert!(page.contains(&row), "no row {row:?} in\n{page}");
         }
         assert!(!page.contains("A fresh sample"), "no fresh sample run, no section");
+        // ... and says where the collective's points go: a row's parts add up to the
+        // points it loses, and each missed target gets its paragraph.
+        let cold = &st.generalisation[0];
+        let bounds =
+            page.lines().find(|l| l.starts_with("| fixed | empty |")).expect("a row of what bounds the targets");
+        let lost: f64 = bounds
+            .split(" | ")
+            .filter(|cell| cell.contains(" / ") && cell.contains('('))
+            .map(|cell| cell.split(' ').next().unwrap().parse::<f64>().unwrap())
+            .sum();
+        assert!((lost - 100.0 * (1.0 - cold.models["collective"].t)).abs() < 0.3, "{lost} in {bounds}");
+        let missed = page.contains("- **Collective − CVM ≥ +10** (missed in 2 of 2 settings)");
+        assert_eq!(missed, cold.models["collective"].t < cold.models["cvm"].t + 0.10, "{page}");
+        let mut leading = st.clone();
+        for r in leading.generalisation.iter_mut().chain(leading.warm_maps.iter_mut()) {
+            r.models.get_mut("collective").unwrap().t = r.models["cvm"].t + 0.2;
+        }
+        let page_leading = studies::markdown(&leading, "spwi-sim eval --all", &settings, None);
+        assert!(!page_leading.contains("- **Collective − CVM ≥ +10**"), "met: no paragraph\n{page_leading}");
 
         // Where the fresh sample ran, its run follows its twin and every target read
         // off the held-out floors alone is read off it too.
@@ -679,6 +704,10 @@ mod tests {
         assert_eq!(r.by_phase.len(), fleet::Phase::ALL.len());
         assert!(r.by_phase.iter().all(|p| p.share > 0.0), "10 s episodes hold every phase: {:?}", r.by_phase);
         assert!((r.by_phase.iter().map(|p| p.share).sum::<f64>() - 1.0).abs() < 1e-9);
+        // Each phase's share of the collective's predictions weighs its accuracy into the whole.
+        assert!((r.by_phase.iter().map(|p| p.collective_share).sum::<f64>() - 1.0).abs() < 1e-9);
+        let weighed: f64 = r.by_phase.iter().map(|p| p.collective_share * p.collective.t).sum();
+        assert!((weighed - r.models["collective"].t).abs() < 1e-9, "{weighed} vs {}", r.models["collective"].t);
         assert_eq!(r.long_walks.len(), fleet::Route::ALL.len());
         assert!((r.long_walks.iter().map(|p| p.share).sum::<f64>() - 1.0).abs() < 1e-9, "{:?}", r.long_walks);
         // The worker standing at its station shows its intent; one that has just left

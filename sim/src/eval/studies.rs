@@ -26,7 +26,7 @@ pub struct Settings {
     pub ticks: u32,
 }
 
-#[derive(Debug, Serialize)]
+#[derive(Debug, Clone, Serialize)]
 pub struct Studies {
     /// Table II: the three scenarios, 3 robots, default set.
     pub scenarios: Vec<Report>,
@@ -314,7 +314,7 @@ fn points(r: &Report, model: &str, other: &str) -> String {
 }
 
 /// "empty" or "warm, 60 s": how a run's station maps started.
-fn maps(r: &Report) -> String {
+pub(super) fn maps(r: &Report) -> String {
     if r.warm_map_s > 0.0 {
         format!("warm, {} s", r.warm_map_s)
     } else {
@@ -322,12 +322,12 @@ fn maps(r: &Report) -> String {
     }
 }
 
-fn pct(v: f64) -> String {
+pub(super) fn pct(v: f64) -> String {
     format!("{:.1}", 100.0 * v)
 }
 
 /// "81.0 (79.2–82.7)": a figure with its 95 % interval.
-fn with_ci(v: f64, ci: [f64; 2]) -> String {
+pub(super) fn with_ci(v: f64, ci: [f64; 2]) -> String {
     format!("{} ({}–{})", pct(v), pct(ci[0]), pct(ci[1]))
 }
 
@@ -653,7 +653,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         }
     }
     fresh_sample(st, s.seed, w);
-    targets(st, s.seed, w);
+    super::reading::targets(st, s.seed, w);
     // The first generalisation column is the scenario-3 run of Table II again.
     let total: f64 =
         [&st.scenarios, &st.robots, &st.horizons, &st.resolution, &st.faults, &st.designs, &st.warm_maps, &st.fresh]
@@ -717,153 +717,12 @@ fn fresh_sample(st: &Studies, seed: u64, w: &mut String) {
     }
 }
 
-/// The targets of perception that transfers (scenario 3, 3 robots, the default set on
-/// the held-out floors unless named), each read off the runs above: the page's own
-/// reading of what holds and what does not, for a fleet's first seconds on a floor
-/// (maps empty) and, where the warm study ran, for a fleet at work. A target is met on
-/// the point estimate; the interval says whether that holds beyond doubt. Where the
-/// fresh sample ran, each target measured on the held-out floors alone is read off it
-/// too.
-fn targets(st: &Studies, seed: u64, w: &mut String) {
-    // The generalisation study runs the default set only.
-    let Some(ours) = st.generalisation.first().map(|r| r.model_set.as_str()) else { return };
-    let mut rows = String::new();
-    for warm in [false, true] {
-        for cameras in [CameraPolicy::Fixed, CameraPolicy::Track] {
-            target_rows(st, ours, warm, cameras, &mut rows);
-        }
-    }
-    if rows.is_empty() {
-        return;
-    }
-    let _ = writeln!(w, "\n## Reading: the targets of perception that transfers\n");
-    let _ = writeln!(
-        w,
-        "Scenario 3, 3 robots, the default set on the held-out floors ({HELDOUT_FLOORS}); every figure is from a table above. *Cameras*: fixed along each robot's spawn heading, or tracking the worker and looking round while it works; a floor is compared with the held-out floors under the same cameras. *Maps*: empty as each episode starts (a fleet's first seconds on a floor), or warm after {WARM_MAP_S} s of work (a fleet at work). A target is met on the point estimate; *beyond doubt* when its 95 % interval clears it too. *Fresh sample*: the same measure on floors and episodes no design was chosen on ({FRESH_FLOORS}, seed {}; the table above), where it was run. The whole tick's cost is a benchmark, not an evaluation: models/README.md.\n",
-        seed + FRESH_SEED_OFFSET
-    );
-    let _ = writeln!(w, "| measure | target | cameras | maps | measured | verdict | fresh sample |");
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|");
-    w.push_str(&rows);
-}
-
 /// A model's accuracy at t and its interval.
-fn at(r: &Report, model: &str) -> Option<(f64, [f64; 2])> {
+pub(super) fn at(r: &Report, model: &str) -> Option<(f64, [f64; 2])> {
     r.models.get(model).map(|a| (a.t, a.t_ci95))
 }
 
 /// How far `model`'s accuracy at t leads `other`'s, as a fraction.
-fn lead(r: &Report, model: &str, other: &str) -> Option<f64> {
+pub(super) fn lead(r: &Report, model: &str, other: &str) -> Option<f64> {
     Some(at(r, model)?.0 - at(r, other)?.0)
-}
-
-/// The rows of [`targets`] whose runs exist, with maps empty or `warm`, under `cameras`.
-fn target_rows<'a>(st: &'a Studies, ours: &str, warm: bool, cameras: CameraPolicy, w: &mut String) {
-    let all: Vec<&Report> = st.designs.iter().chain(&st.generalisation).chain(&st.warm_maps).collect();
-    let fresh_runs: Vec<&Report> = st.fresh.iter().collect();
-    let find = |runs: &[&'a Report], floors: &str, robots: usize| {
-        runs.iter().copied().find(|r| {
-            r.model_set == ours
-                && r.robots == robots
-                && r.floors.starts_with(floors)
-                && r.cameras == Some(cameras)
-                && (r.warm_map_s > 0.0) == warm
-        })
-    };
-    let Some(heldout) = find(&all, HELDOUT_FLOORS, 3) else { return };
-    let fresh = find(&fresh_runs, FRESH_FLOORS, 3);
-    let (Some(collective), Some(cvm)) = (at(heldout, "collective"), at(heldout, "cvm")) else { return };
-    let maps = maps(heldout);
-    // The cameras and maps columns of every row.
-    let setting = format!("{} | {maps}", format!("{cameras:?}").to_lowercase());
-    // A measure on the fresh sample: "+4.1, missed by 5.9 pts", or "–" where not run.
-    let on_fresh = |measure: &dyn Fn(&Report) -> Option<(String, String)>| {
-        fresh.and_then(measure).map_or("–".to_owned(), |(value, verdict)| format!("{value}, {verdict}"))
-    };
-    let vs_cvm =
-        |r: &Report| lead(r, "collective", "cvm").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, 0.10, None)));
-    let _ = writeln!(
-        w,
-        "| collective − CVM at t | ≥ +10 pts | {setting} | {:+.1} (collective {}, CVM {}) | {} | {} |",
-        100.0 * (collective.0 - cvm.0),
-        with_ci(collective.0, collective.1),
-        with_ci(cvm.0, cvm.1),
-        verdict(collective.0 - cvm.0, 0.10, None),
-        on_fresh(&vs_cvm)
-    );
-    for floors in ["factory-moved", "factory.toml mirrored"] {
-        if let Some(c) = find(&all, floors, 3).and_then(|r| at(r, "collective")) {
-            let behind = collective.0 - c.0;
-            let _ = writeln!(
-                w,
-                "| collective at t on {floors}, behind the held-out floors | ≤ 5 pts | {setting} | {:.1} (collective {}) | {} | – |",
-                100.0 * behind,
-                with_ci(c.0, c.1),
-                verdict(-behind, -0.05, None)
-            );
-        }
-    }
-    let vs_ego =
-        |r: &Report| lead(r, "collective", "ego").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, 0.08, None)));
-    if let Some((value, verdict)) = vs_ego(heldout) {
-        let _ = writeln!(
-            w,
-            "| collective − ego at t | ≥ +8 pts | {setting} | {value} | {verdict} | {} |",
-            on_fresh(&vs_ego)
-        );
-    }
-    let team: Vec<(f64, [f64; 2])> =
-        (1..=4).filter_map(|n| find(&all, HELDOUT_FLOORS, n)).filter_map(|r| at(r, "team_all_ticks")).collect();
-    if team.len() == 4 {
-        let rising = team.windows(2).all(|p| p[1].0 > p[0].0);
-        let _ = writeln!(
-            w,
-            "| team, all ticks, 1 → 2 → 3 → 4 robots | rising at every step | {setting} | {} | {} | – |",
-            team.iter().map(|a| pct(a.0)).collect::<Vec<_>>().join(" → "),
-            if rising { "met" } else { "missed" }
-        );
-        let three = team[2];
-        let team_3 =
-            |r: &Report| at(r, "team_all_ticks").map(|a| (with_ci(a.0, a.1), verdict(a.0, 0.80, Some(a.1[0]))));
-        let _ = writeln!(
-            w,
-            "| team, all ticks, 3 robots | ≥ 80 % | {setting} | {} | {} | {} |",
-            with_ci(three.0, three.1),
-            verdict(three.0, 0.80, Some(three.1[0])),
-            on_fresh(&team_3)
-        );
-    }
-    let farther = |r: &Report| {
-        r.close_pair.get("collective_farther").map(|a| (with_ci(a.t, a.t_ci95), verdict(a.t, 0.75, Some(a.t_ci95[0]))))
-    };
-    if let Some((value, verdict)) = farther(heldout) {
-        let _ = writeln!(
-            w,
-            "| recall of the farther station of a close pair | ≥ 75 % | {setting} | {value} | {verdict} | {} |",
-            on_fresh(&farther)
-        );
-    }
-}
-
-/// "met", "met beyond doubt" (the interval's lower end `low` clears the target too)
-/// or "missed by 2.1 pts": `value` against `target`, both as fractions.
-fn verdict(value: f64, target: f64, low: Option<f64>) -> String {
-    match (value >= target, low) {
-        (true, Some(l)) if l >= target => "met beyond doubt".into(),
-        (true, _) => "met".into(),
-        (false, _) => format!("missed by {:.1} pts", 100.0 * (target - value)),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::verdict;
-
-    #[test]
-    fn a_target_is_met_on_its_point_estimate_and_beyond_doubt_only_when_its_interval_clears_it() {
-        assert_eq!(verdict(0.83, 0.80, Some(0.81)), "met beyond doubt");
-        assert_eq!(verdict(0.83, 0.80, Some(0.79)), "met");
-        assert_eq!(verdict(0.80, 0.80, None), "met");
-        assert_eq!(verdict(0.779, 0.80, Some(0.75)), "missed by 2.1 pts");
-    }
 }
