@@ -22,6 +22,18 @@ const SETTINGS: [(CameraPolicy, bool); 4] = [
 /// The floors beside the held-out ones whose gap to them is a target.
 const VARIANT_FLOORS: [&str; 2] = ["factory-moved", "factory.toml mirrored"];
 
+/// The targets, as fractions: the verdicts and the bounds' paragraphs read the same ones.
+/// The collective's lead over the CVM at t.
+const CVM_LEAD: f64 = 0.10;
+/// The collective's lead over the ego GRU at t.
+const EGO_LEAD: f64 = 0.08;
+/// How far a variant of the built-in floor may fall behind the held-out floors.
+const VARIANT_GAP: f64 = 0.05;
+/// The team's accuracy over all ticks with 3 robots.
+const TEAM_ALL_TICKS: f64 = 0.80;
+/// The recall of the farther station of a close pair.
+const FARTHER_RECALL: f64 = 0.75;
+
 /// A station on the team's map on fewer robot-ticks than this counts as unseen.
 const UNSEEN: f64 = 0.10;
 
@@ -98,14 +110,14 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
         fresh.and_then(measure).map_or("–".to_owned(), |(value, verdict)| format!("{value}, {verdict}"))
     };
     let vs_cvm =
-        |r: &Report| lead(r, "collective", "cvm").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, 0.10, None)));
+        |r: &Report| lead(r, "collective", "cvm").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, CVM_LEAD, None)));
     let _ = writeln!(
         w,
         "| collective − CVM at t | ≥ +10 pts | {setting} | {:+.1} (collective {}, CVM {}) | {} | {} |",
         100.0 * (collective.0 - cvm.0),
         with_ci(collective.0, collective.1),
         with_ci(cvm.0, cvm.1),
-        verdict(collective.0 - cvm.0, 0.10, None),
+        verdict(collective.0 - cvm.0, CVM_LEAD, None),
         on_fresh(&vs_cvm)
     );
     for floors in VARIANT_FLOORS {
@@ -116,12 +128,12 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
                 "| collective at t on {floors}, behind the held-out floors | ≤ 5 pts | {setting} | {:.1} (collective {}) | {} | – |",
                 100.0 * behind,
                 with_ci(c.0, c.1),
-                verdict(-behind, -0.05, None)
+                verdict(-behind, -VARIANT_GAP, None)
             );
         }
     }
     let vs_ego =
-        |r: &Report| lead(r, "collective", "ego").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, 0.08, None)));
+        |r: &Report| lead(r, "collective", "ego").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, EGO_LEAD, None)));
     if let Some((value, verdict)) = vs_ego(heldout) {
         let _ = writeln!(
             w,
@@ -142,18 +154,21 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
             if rising { "met" } else { "missed" }
         );
         let three = team[2];
-        let team_3 =
-            |r: &Report| at(r, "team_all_ticks").map(|a| (with_ci(a.0, a.1), verdict(a.0, 0.80, Some(a.1[0]))));
+        let team_3 = |r: &Report| {
+            at(r, "team_all_ticks").map(|a| (with_ci(a.0, a.1), verdict(a.0, TEAM_ALL_TICKS, Some(a.1[0]))))
+        };
         let _ = writeln!(
             w,
             "| team, all ticks, 3 robots | ≥ 80 % | {setting} | {} | {} | {} |",
             with_ci(three.0, three.1),
-            verdict(three.0, 0.80, Some(three.1[0])),
+            verdict(three.0, TEAM_ALL_TICKS, Some(three.1[0])),
             on_fresh(&team_3)
         );
     }
     let farther = |r: &Report| {
-        r.close_pair.get("collective_farther").map(|a| (with_ci(a.t, a.t_ci95), verdict(a.t, 0.75, Some(a.t_ci95[0]))))
+        r.close_pair
+            .get("collective_farther")
+            .map(|a| (with_ci(a.t, a.t_ci95), verdict(a.t, FARTHER_RECALL, Some(a.t_ci95[0]))))
     };
     if let Some((value, verdict)) = farther(heldout) {
         let _ = writeln!(
@@ -213,7 +228,9 @@ fn bounds(st: &Studies, ours: &str, w: &mut String) {
     let all = scored_runs(st);
     let heldout: Vec<((CameraPolicy, bool), &Report)> =
         SETTINGS.into_iter().filter_map(|s| find(&all, ours, HELDOUT_FLOORS, 3, s).map(|r| (s, r))).collect();
-    if heldout.is_empty() || heldout.iter().any(|(_, r)| r.by_phase.is_empty() || at(r, "cvm").is_none()) {
+    let scored =
+        |r: &Report| !r.by_phase.is_empty() && r.models.contains_key("collective") && r.models.contains_key("cvm");
+    if heldout.is_empty() || !heldout.iter().all(|(_, r)| scored(r)) {
         return;
     }
     let _ = writeln!(w, "\n### What bounds the targets missed\n");
@@ -237,7 +254,7 @@ fn bounds(st: &Studies, ours: &str, w: &mut String) {
             "| {} | {} | {} | {} | {}, {unmapped} | {} |",
             setting(*cameras, r),
             pct(r.models["collective"].t),
-            pct(r.models["cvm"].t + 0.10),
+            pct(r.models["cvm"].t + CVM_LEAD),
             parts.join(" | "),
             pct(r.goal_unmapped_share),
             pct(best_of_both(r))
@@ -253,22 +270,23 @@ fn bounds(st: &Studies, ours: &str, w: &mut String) {
 
 /// Why the collective does not lead the CVM by 10 points.
 fn vs_cvm_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
-    let missed: Vec<&Report> =
-        heldout.iter().map(|(_, r)| *r).filter(|r| lead(r, "collective", "cvm").is_some_and(|g| g < 0.10)).collect();
+    let missed: Vec<&Report> = heldout
+        .iter()
+        .map(|(_, r)| *r)
+        .filter(|r| lead(r, "collective", "cvm").is_some_and(|g| g < CVM_LEAD))
+        .collect();
     if missed.is_empty() {
         return;
     }
     // How far the better of the two in every part stays below CVM + 10, where it does.
     let shortfalls: Vec<f64> =
-        missed.iter().map(|r| 100.0 * (r.models["cvm"].t + 0.10 - best_of_both(r))).filter(|s| *s > 0.0).collect();
+        missed.iter().map(|r| 100.0 * (r.models["cvm"].t + CVM_LEAD - best_of_both(r))).filter(|s| *s > 0.0).collect();
     // The parts of the cycle where one of the two leads in every setting.
-    let phases = heldout[0].1.by_phase.iter().map(|p| p.phase);
     let leads_everywhere = |ahead: fn(&PhaseAccuracy) -> bool| -> Vec<String> {
-        phases
-            .clone()
-            .enumerate()
-            .filter(|&(k, _)| heldout.iter().all(|(_, r)| r.by_phase.get(k).is_some_and(ahead)))
-            .map(|(_, name)| format!("*{name}*"))
+        let first = &heldout[0].1.by_phase;
+        (0..first.len())
+            .filter(|&k| heldout.iter().all(|(_, r)| r.by_phase.get(k).is_some_and(ahead)))
+            .map(|k| format!("*{}*", first[k].phase))
             .collect()
     };
     let collective_leads = leads_everywhere(|p| p.collective.t > p.cvm.t);
@@ -309,7 +327,7 @@ fn variant_bounds(all: &[&Report], ours: &str, heldout: &[((CameraPolicy, bool),
         for floors in VARIANT_FLOORS {
             let Some(v) = find(all, ours, floors, 3, (*cameras, *warm)) else { continue };
             let (Some(c), Some(ch)) = (at(v, "collective"), at(h, "collective")) else { continue };
-            if ch.0 - c.0 <= 0.05 {
+            if ch.0 - c.0 <= VARIANT_GAP {
                 continue;
             }
             let unseen: Vec<String> = v
@@ -357,7 +375,7 @@ fn variant_bounds(all: &[&Report], ours: &str, heldout: &[((CameraPolicy, bool),
 
 /// Why the collective does not lead the ego GRU by 8 points.
 fn sharing_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
-    let missed = heldout.iter().filter(|(_, r)| lead(r, "collective", "ego").is_some_and(|g| g < 0.08)).count();
+    let missed = heldout.iter().filter(|(_, r)| lead(r, "collective", "ego").is_some_and(|g| g < EGO_LEAD)).count();
     if missed == 0 {
         return;
     }
@@ -380,7 +398,7 @@ fn sharing_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
 fn coverage_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
     for ((cameras, _), r) in heldout {
         let Some((team, _)) = at(r, "team_all_ticks") else { continue };
-        if team >= 0.80 || *cameras != CameraPolicy::Track {
+        if team >= TEAM_ALL_TICKS || *cameras != CameraPolicy::Track {
             continue;
         }
         let _ = writeln!(
@@ -397,7 +415,7 @@ fn coverage_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
 /// Why the farther station of a close pair is recalled less than 75 % of the time.
 fn farther_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
     let recall = |r: &Report| r.close_pair.get("collective_farther").map(|a| a.t);
-    let missed = heldout.iter().filter(|(_, r)| recall(r).is_some_and(|t| t < 0.75)).count();
+    let missed = heldout.iter().filter(|(_, r)| recall(r).is_some_and(|t| t < FARTHER_RECALL)).count();
     if missed == 0 {
         return;
     }
