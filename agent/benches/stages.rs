@@ -119,6 +119,7 @@ fn bench_backend(backend: Backend) {
             camera: Default::default(),
             relay_after: None,
             relayers: 4,
+            ask_rounds: 2,
             stale_after: 0, // the bench repeats one frame on purpose
         },
         set.inference(TemporalModel::Collective).unwrap(),

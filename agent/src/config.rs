@@ -35,6 +35,10 @@ pub struct TickConfig {
     /// How many members relay each tick's ballots: a different few each tick, every
     /// member when the fleet has no more (`agent/src/engine.rs`, `Engine::relays`).
     pub relayers: u32,
+    /// How many times between the relay time and the deadline a robot still waiting
+    /// for a member's vote sends the ballots it holds, which asks the tick's relayers
+    /// for the missing vote; also the most answers a robot gives a tick (0: neither).
+    pub ask_rounds: u32,
     /// A camera showing the same worker detection this many frames in a row is frozen:
     /// set aside until it changes (0: never).
     pub stale_after_frames: u32,
@@ -113,6 +117,7 @@ impl Default for TickConfig {
             decision_deadline_ms: 60,
             relay_ms: 40,
             relayers: 4,
+            ask_rounds: 2,
             stale_after_frames: 5,
             consensus: ConsensusRule::Trust,
             alpha: None,
@@ -210,6 +215,9 @@ impl AgentConfig {
         if !(1..=1024).contains(&t.relayers) {
             bail!("tick.relayers = {}: must be within 1..=1024 (tick.relay_ms = 0 relays nothing)", t.relayers);
         }
+        if t.ask_rounds > 10 {
+            bail!("tick.ask_rounds = {}: must be within 0..=10 (0: robots never ask for a missing vote)", t.ask_rounds);
+        }
         for (name, v) in [("tick.alpha", t.alpha), ("tick.beta", t.beta)] {
             if let Some(v) = v {
                 if !(v.is_finite() && (0.0..=1000.0).contains(&v)) {
@@ -280,6 +288,11 @@ mod tests {
         let c: AgentConfig = toml::from_str("[tick]\nrelayers = 0\n").unwrap();
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("tick.relayers = 0") && e.contains("1..=1024"), "{e}");
+        let c: AgentConfig = toml::from_str("[tick]\nask_rounds = 11\n").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("tick.ask_rounds = 11") && e.contains("0..=10"), "{e}");
+        let c: AgentConfig = toml::from_str("[tick]\nask_rounds = 0\n").unwrap();
+        c.validate().expect("never asking is allowed");
         let c: AgentConfig = toml::from_str("[tick]\ntrust_floor = 1.5\n").unwrap();
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("tick.trust_floor = 1.5") && e.contains("0..=1"), "{e}");

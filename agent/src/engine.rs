@@ -15,6 +15,9 @@
 //! relay_after passed ─► Ballots out (every vote held for the tick, ours and peers';
 //!                      by the few members that relay this tick)
 //!            peers' relayed ballots fill in votes lost on our own links
+//! still missing a vote ─► Ballots out again, ask_rounds times before the deadline
+//!                      (an ask: what we hold shows what we lack); a relayer that holds
+//!                      what a peer's ballots lack answers with its own
 //! a vote from every active member that said it votes, or decision_deadline passed
 //!       ─► consensus ─► Decision out (naming a digest of the ballots counted)
 //!       ─► trust: each voter judged against the others
@@ -29,7 +32,15 @@
 //!
 //! The decision is a deterministic function of the ballots held, so robots that hold
 //! the same ballots decide the same; relaying each robot's ballots partway through the
-//! tick is what makes them hold the same ballots when links lose messages. Each robot's
+//! tick is what makes them hold the same ballots when links lose messages. A relay sent
+//! once is lost as easily as the vote it carries: on links that lose 30 % of packets a
+//! robot still missed some vote on one tick in six. So every Ballots message lists every
+//! vote its sender holds, which also says what it lacks; a robot still waiting for a
+//! vote sends its ballots again, a few times before the deadline, and a relayer of the
+//! tick that holds a vote a peer's ballots lack answers with its own (also after it
+//! decided the tick). Each round needs a message there and one back, so a few rounds
+//! bring the missing votes in on lossy links, and on links that lose nothing no robot
+//! waits past the relay time and nothing more is sent. Each robot's
 //! next embedding carries its latest decision in brief ([`Verdict`]): comparing class
 //! and digest with ours measures how often the team agrees and shows, per robot, when
 //! it decided on fewer ballots, without any robot hearing every peer's decisions (the
@@ -94,6 +105,11 @@ pub struct EngineConfig {
     /// before this field had every member relay).
     #[serde(default = "every_member")]
     pub relayers: usize,
+    /// How many times a robot still waiting for a vote asks for it between the relay
+    /// time and the deadline; also the most answers it gives a tick ([`Engine::answer`];
+    /// recordings made before this field never asked).
+    #[serde(default)]
+    pub ask_rounds: u32,
     /// A feed showing the same worker detection this many times in a row is stale
     /// (0: never).
     #[serde(default)]
@@ -133,6 +149,7 @@ impl EngineConfig {
             camera: camera.clone(),
             relay_after: (tick.relay_ms > 0).then(|| Duration::from_millis(tick.relay_ms)),
             relayers: tick.relayers as usize,
+            ask_rounds: tick.ask_rounds,
             stale_after: tick.stale_after_frames,
         }
     }
@@ -211,8 +228,10 @@ struct Tick {
     /// Peers whose share of the tick carried no vote (or whose feed is stale).
     abstaining: BTreeSet<RobotId>,
     votes: BTreeMap<RobotId, VoteMsg>,
-    /// We published the ballots we hold for the tick.
-    relayed: bool,
+    /// Rounds passed: the relay, then the asks ([`EngineConfig::ask_rounds`]).
+    rounds: u32,
+    /// Answers we gave to peers' ballots that lacked votes we hold.
+    answers: u32,
     /// Peers' verdicts that arrived before our decision, one per peer.
     peer_verdicts: BTreeMap<RobotId, Verdict>,
 }
@@ -224,7 +243,8 @@ impl Tick {
             own_frame: None,
             abstaining: BTreeSet::new(),
             votes: BTreeMap::new(),
-            relayed: false,
+            rounds: 0,
+            answers: 0,
             peer_verdicts: BTreeMap::new(),
         }
     }
@@ -245,6 +265,9 @@ fn relay_rank(tick: u64, robot: &RobotId) -> u64 {
 
 /// How many decided ticks are remembered to recognise late messages.
 const DECIDED_MEMORY: u64 = 1024;
+/// Decided ticks whose ballots we keep to answer peers still deciding them (a tick is
+/// decided within its deadline, well before the next but one starts).
+const ANSWERED_TICKS: usize = 2;
 
 pub struct Engine {
     cfg: EngineConfig,
@@ -263,6 +286,8 @@ pub struct Engine {
     active: BTreeSet<RobotId>,
     open: BTreeMap<u64, Tick>,
     decided: BTreeMap<u64, Verdict>,
+    /// The latest decided ticks, their ballots kept to answer peers' asks.
+    settled: BTreeMap<u64, Tick>,
     /// Our own feed: the worker's box and keypoints, frame after frame.
     own_feed: Repeats<(BBox, Vec<f32>)>,
     /// Each peer's feed: its embeddings.
@@ -319,6 +344,7 @@ impl Engine {
             active: BTreeSet::new(),
             open: BTreeMap::new(),
             decided: BTreeMap::new(),
+            settled: BTreeMap::new(),
             own_feed: Repeats::default(),
             peer_feeds: BTreeMap::new(),
             peer_views: BTreeMap::new(),
@@ -386,12 +412,16 @@ impl Engine {
             .values()
             .map(|t| {
                 let next = t.started + self.cfg.decision_deadline;
-                match self.cfg.relay_after {
-                    Some(after) if !t.relayed => next.min(t.started + after),
-                    _ => next,
-                }
+                self.round_time(t, t.rounds).map_or(next, |r| next.min(r))
             })
             .min()
+    }
+
+    /// When round `k` of tick `t` comes: round 0 at the relay time, then the asks,
+    /// spread evenly between it and the deadline (`None`: no relays, or no rounds left).
+    fn round_time(&self, t: &Tick, k: u32) -> Option<Duration> {
+        let after = self.cfg.relay_after.filter(|_| k <= self.cfg.ask_rounds)?;
+        Some(t.started + after + self.cfg.decision_deadline.saturating_sub(after) * k / (self.cfg.ask_rounds + 1))
     }
 
     /// Handles one input at time `now` and returns what to publish, in order.
@@ -568,18 +598,38 @@ impl Engine {
             self.metrics.late_relayed_ballots += missed.count() as u64;
         }
         let me = self.cfg.robot.clone();
+        let theirs: BTreeSet<RobotId> = b.votes.iter().map(|v| v.robot.clone()).collect();
         let usable: Vec<VoteMsg> =
             b.votes.into_iter().filter(|v| v.robot != me && !self.peer_is_stale(&v.robot)).collect();
-        let Some(tick) = self.accept_peer(&b.robot, b.instance, b.tick, now) else { return };
-        let mut used = 0;
-        for v in usable {
-            if let std::collections::btree_map::Entry::Vacant(slot) = tick.votes.entry(v.robot.clone()) {
-                slot.insert(v);
-                used += 1;
+        if let Some(tick) = self.accept_peer(&b.robot, b.instance, b.tick, now) {
+            let mut used = 0;
+            for v in usable {
+                if let std::collections::btree_map::Entry::Vacant(slot) = tick.votes.entry(v.robot.clone()) {
+                    slot.insert(v);
+                    used += 1;
+                }
             }
+            self.metrics.relayed_ballots_used += used;
         }
-        self.metrics.relayed_ballots_used += used;
+        self.answer(&b.robot, b.tick, &theirs, out);
         self.advance(b.tick, now, out);
+    }
+
+    /// A peer's ballots list every vote it holds for their tick: if they lack one we
+    /// hold (not the peer's own) and we relay the tick, we answer with ours, at most
+    /// `ask_rounds` times a tick, also once we decided it.
+    fn answer(&mut self, peer: &RobotId, t: u64, theirs: &BTreeSet<RobotId>, out: &mut Vec<Output>) {
+        if self.cfg.relay_after.is_none() || !self.relays(t) {
+            return;
+        }
+        let Some(tick) = self.open.get_mut(&t).or_else(|| self.settled.get_mut(&t)) else { return };
+        let lack = tick.votes.keys().any(|r| r != peer && !theirs.contains(r));
+        if lack && tick.answers < self.cfg.ask_rounds {
+            tick.answers += 1;
+            self.metrics.ballot_answers += 1;
+            let votes = tick.votes.values().cloned().collect();
+            out.push(self.ballots(t, votes));
+        }
     }
 
     /// Checks a peer message's origin and tick; returns the tick to file it in.
@@ -627,17 +677,12 @@ impl Engine {
         let Some(tick) = self.open.get(&t) else { return };
         let decision_due = now >= tick.started + self.cfg.decision_deadline;
 
-        // Relay: partway through the tick, the ballots we hold go to every peer.
-        if let Some(after) = self.cfg.relay_after {
-            if now >= self.open[&t].started + after {
-                self.relay(t, out);
-            }
-        }
+        // Relay, then ask: partway through the tick, the ballots we hold go to every peer.
+        self.ask_rounds(t, now, out);
 
         // The decision, once our frame is in and every active member voted or abstained.
         let tick = &self.open[&t];
-        let all_voted = tick.own_frame.is_some()
-            && self.live.intersection(&self.active).all(|r| tick.abstaining.contains(r) || tick.votes.contains_key(r));
+        let all_voted = tick.own_frame.is_some() && !self.waits_for_a_vote(tick);
         if all_voted {
             self.decide(t, DecidedBy::AllVoted, now, out);
         } else if decision_due {
@@ -712,23 +757,37 @@ impl Engine {
         }
     }
 
-    /// Publishes the ballots we hold for tick `t`, once, if we are one of its relayers
-    /// (nothing when we hold none).
-    fn relay(&mut self, t: u64, out: &mut Vec<Output>) {
-        if self.open[&t].relayed {
+    /// Some active member has neither voted nor abstained in `tick` (as far as we heard).
+    fn waits_for_a_vote(&self, tick: &Tick) -> bool {
+        self.live.intersection(&self.active).any(|r| !tick.abstaining.contains(r) && !tick.votes.contains_key(r))
+    }
+
+    /// The rounds of tick `t` that came by `now` (one message however many came): at the
+    /// first, the relay time, the tick's relayers publish the ballots they hold (nothing
+    /// when they hold none); at each later one, a robot still waiting for a member's
+    /// vote publishes them, an ask.
+    fn ask_rounds(&mut self, t: u64, now: Duration, out: &mut Vec<Output>) {
+        let tick = &self.open[&t];
+        let due = (tick.rounds..).take_while(|&k| self.round_time(tick, k).is_some_and(|at| now >= at)).count();
+        if due == 0 {
             return;
         }
-        let relays = self.relays(t);
+        let relay = tick.rounds == 0 && self.relays(t) && !tick.votes.is_empty();
+        // Not at the relay time itself: the relays of that moment are still on their way.
+        let ask = tick.rounds + due as u32 > 1 && self.waits_for_a_vote(tick);
         let tick = self.open.get_mut(&t).expect("open");
-        tick.relayed = true;
-        if relays && !tick.votes.is_empty() {
-            out.push(Output::Ballots(BallotsMsg {
-                robot: self.cfg.robot.clone(),
-                instance: self.cfg.instance,
-                tick: t,
-                votes: tick.votes.values().cloned().collect(),
-            }));
+        tick.rounds += due as u32;
+        if relay || ask {
+            if ask && !relay {
+                self.metrics.ballot_asks += 1;
+            }
+            let votes = tick.votes.values().cloned().collect();
+            out.push(self.ballots(t, votes));
         }
+    }
+
+    fn ballots(&self, tick: u64, votes: Vec<VoteMsg>) -> Output {
+        Output::Ballots(BallotsMsg { robot: self.cfg.robot.clone(), instance: self.cfg.instance, tick, votes })
     }
 
     /// Whether we relay tick `t`'s ballots. Every member holding them relaying them
@@ -746,12 +805,14 @@ impl Engine {
     }
 
     fn decide(&mut self, t: u64, by: DecidedBy, now: Duration, out: &mut Vec<Output>) {
-        // Deciding before the relay time: the ballots we hold go out now, since a peer
-        // that lost one of them may still be waiting.
-        if self.cfg.relay_after.is_some() {
-            self.relay(t, out);
+        // Deciding before the relay time: if we relay the tick, the ballots we hold go
+        // out now, since a peer that lost one of them may still be waiting.
+        let tick = &self.open[&t];
+        if self.cfg.relay_after.is_some() && tick.rounds == 0 && self.relays(t) && !tick.votes.is_empty() {
+            let votes = tick.votes.values().cloned().collect();
+            out.push(self.ballots(t, votes));
         }
-        let tick = self.open.remove(&t).expect("open");
+        let mut tick = self.open.remove(&t).expect("open");
         let t0 = Instant::now();
         let mut ballots: Vec<Ballot<'_>> = tick.votes.values().map(Ballot::from).collect();
         let steps = consensus::decide(&mut ballots, self.cfg.consensus);
@@ -777,8 +838,12 @@ impl Engine {
             digest,
         };
         let ours = Verdict::of(&d);
-        for theirs in tick.peer_verdicts.values() {
+        for theirs in std::mem::take(&mut tick.peer_verdicts).values() {
             record_agreement(&mut self.metrics, &ours, theirs);
+        }
+        self.settled.insert(t, tick);
+        while self.settled.len() > ANSWERED_TICKS {
+            self.settled.pop_first();
         }
         self.unshared_verdict = Some(ours.clone());
         self.decided.insert(t, ours);
@@ -839,6 +904,7 @@ pub(crate) mod tests {
             camera: CameraCalibration::default(),
             relay_after: None,
             relayers: 4,
+            ask_rounds: 2,
             stale_after: 5,
         };
         Engine::new(cfg, set.inference(TemporalModel::Collective).unwrap())
@@ -1332,7 +1398,91 @@ pub(crate) mod tests {
         let out = a.handle(Input::Poll, ms(140));
         let Some(Output::Ballots(b)) = out.first() else { panic!("a relay at 40 ms: {out:?}") };
         assert_eq!((b.tick, b.votes.len(), &b.votes[0].robot), (2, 1, &id("a")));
-        assert_eq!(a.next_deadline(), Some(ms(160)), "relayed once; the deadline is next");
+        // Still without b's vote, a asks for it, the asks spread to the deadline, then decides.
+        let asks = a.cfg.ask_rounds;
+        for k in 1..=asks {
+            let at = ms(140) + ms(20) * k / (asks + 1);
+            assert_eq!(a.next_deadline(), Some(at), "ask {k}");
+            assert!(a.handle(Input::Poll, at - ms(1)).is_empty(), "not before its time");
+            let out = a.handle(Input::Poll, at);
+            assert!(matches!(out.as_slice(), [Output::Ballots(b)] if b.votes.len() == 1), "ask {k}: {out:?}");
+        }
+        assert_eq!(a.metrics.ballot_asks, u64::from(asks));
+        assert_eq!(a.next_deadline(), Some(ms(160)), "no rounds left; the deadline is next");
+        let out = a.handle(Input::Poll, ms(160));
+        assert!(matches!(out.as_slice(), [Output::Decision(_)]), "{out:?}");
+    }
+
+    /// Hands every Ballots message among `outs[from]` to robot `to`; returns its outputs.
+    fn hand_ballots(team: &mut [Engine], outs: &[Vec<Output>], from: usize, to: usize, now: Duration) -> Vec<Output> {
+        let ballots: Vec<Input> = outs[from]
+            .iter()
+            .filter_map(|o| if let Output::Ballots(b) = o { Some(Input::Ballots(b.clone())) } else { None })
+            .collect();
+        ballots.into_iter().flat_map(|b| team[to].handle(b, now)).collect()
+    }
+
+    fn count_ballots(out: &[Output]) -> usize {
+        out.iter().filter(|o| matches!(o, Output::Ballots(_))).count()
+    }
+
+    #[test]
+    fn a_robot_whose_vote_and_relays_were_lost_asks_and_a_peer_that_decided_answers() {
+        let set = models();
+        let mut team = team_of_three(&set, Some(ms(40)));
+        let outs = tick_losing_a_vote_to_b(&mut team, 2);
+        let da = decisions(&outs[0])[0].clone();
+        // a's and c's relays, sent as they decided, never reach b either. At the relay
+        // time b relays what it holds, its own vote and c's: that shows a's is missing.
+        let ob = team[1].handle(Input::Poll, ms(240));
+        let Some(Output::Ballots(asked)) = ob.first() else { panic!("b relays at 40 ms: {ob:?}") };
+        assert_eq!(asked.votes.iter().map(|v| v.robot.as_str()).collect::<Vec<_>>(), ["b", "c"]);
+        // a decided tick 2 already; it answers with every vote it holds, a's among them.
+        let answer = team[0].handle(Input::Ballots(asked.clone()), ms(241));
+        let Some(Output::Ballots(answer)) = answer.first() else { panic!("a answers: {answer:?}") };
+        assert_eq!(answer.votes.len(), 3);
+        assert_eq!(team[0].metrics.ballot_answers, 1);
+        let db = team[1].handle(Input::Ballots(answer.clone()), ms(242));
+        let db = decisions(&db);
+        assert_eq!(db.len(), 1);
+        assert_eq!((db[0].decided_by, db[0].digest, &db[0].steps), (DecidedBy::AllVoted, da.digest, &da.steps));
+        // Answers are bounded: a peer asking again and again gets ask_rounds of them.
+        let more: usize =
+            (0..5).map(|i| count_ballots(&team[0].handle(Input::Ballots(asked.clone()), ms(243 + i)))).sum();
+        assert_eq!(more, (team[0].cfg.ask_rounds - 1) as usize);
+        // A relayer that holds nothing the asker lacks does not answer.
+        let mut full = answer.clone();
+        full.robot = id("b");
+        assert!(team[2].handle(Input::Ballots(full), ms(250)).is_empty());
+    }
+
+    #[test]
+    fn on_links_that_lose_nothing_each_robot_relays_once_and_nobody_asks_or_answers() {
+        let set = models();
+        let mut team = team_of_three(&set, Some(ms(40)));
+        for t in 2..6 {
+            let now = ms(100 * t);
+            let mut outs: Vec<Vec<Output>> =
+                (0..3).map(|i| team[i].handle(Input::Frame(frame(["a", "b", "c"][i], t, true)), now)).collect();
+            let shares: Vec<Input> = outs.iter().map(|o| Input::Embedding(take_embedding(o))).collect();
+            for i in 0..3 {
+                for (j, e) in shares.iter().enumerate().filter(|(j, _)| *j != i) {
+                    let said = team[i].handle(e.clone(), now + ms(1 + j as u64));
+                    outs[i].extend(said);
+                }
+            }
+            assert!(outs.iter().all(|o| decisions(o).len() == 1 && count_ballots(o) == 1), "tick {t}: {outs:?}");
+            for from in 0..3 {
+                for to in (0..3).filter(|&to| to != from) {
+                    let said = hand_ballots(&mut team, &outs, from, to, now + ms(5));
+                    assert!(said.is_empty(), "tick {t}: {to} answers {from}'s relay: {said:?}");
+                }
+            }
+            for e in team.iter_mut() {
+                assert!(e.handle(Input::Poll, now + ms(99)).is_empty());
+            }
+        }
+        assert!(team.iter().all(|e| e.metrics.ballot_asks == 0 && e.metrics.ballot_answers == 0));
     }
 
     #[test]

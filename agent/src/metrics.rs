@@ -154,6 +154,10 @@ pub struct Metrics {
     pub relayed_ballots_used: u64,
     /// Relayed votes that arrived after we decided without them.
     pub late_relayed_ballots: u64,
+    /// Our ballots sent again because we still waited for a member's vote (asks)...
+    pub ballot_asks: u64,
+    /// ... and because a peer's ballots lacked a vote we held (answers).
+    pub ballot_answers: u64,
     /// Our own frames set aside because the feed repeated itself (a frozen camera).
     pub repeated_frames: u64,
     /// Messages of peers whose feed repeats itself, left out.
@@ -178,7 +182,7 @@ impl Metrics {
     /// Registers every counter and histogram, as they stand, in `registry` (the
     /// scrape's own: see [`exposition`]); `members` is the live member count.
     pub fn register(&self, registry: &mut Registry, members: usize) {
-        let counters: [(&str, &str, u64); 17] = [
+        let counters: [(&str, &str, u64); 19] = [
             ("spwi_frames", "detection frames processed", self.frames),
             ("spwi_frames_with_worker", "frames in which the worker was seen", self.frames_with_worker),
             ("spwi_decisions", "team decisions published", self.decisions),
@@ -213,6 +217,12 @@ impl Metrics {
                 "spwi_late_relayed_ballots",
                 "relayed votes that arrived after we decided without them",
                 self.late_relayed_ballots,
+            ),
+            ("spwi_ballot_asks", "our ballots sent again while we waited for a member's vote", self.ballot_asks),
+            (
+                "spwi_ballot_answers",
+                "our ballots sent to a peer whose ballots lacked a vote we held",
+                self.ballot_answers,
             ),
             ("spwi_repeated_frames", "own frames set aside: the feed repeated itself", self.repeated_frames),
             (

@@ -38,10 +38,14 @@ const RTO_MIN: &str = "5ms";
 /// decision deadline: at 10 % one decision on 92–98 % of ticks in most runs here, but on
 /// 55.6 % in one of CI's; so only deciding is asserted then.
 const TCP_LINUX_RTO: [Phase; 3] = [(0.0, 0.98, 0.97), (0.10, 0.0, 0.95), (0.30, 0.0, 0.90)];
-/// On QUIC with mixed reliability a lost datagram loses one message and the ballot
-/// relay makes up for most: 98–100 % at 10 %, 80–84 % at 30 % in four runs here, and
-/// one run below 70 % (plain QUIC: 61 %); the bound at 30 % leaves room for that spread.
-const QUIC: [Phase; 3] = [(0.0, 0.98, 0.97), (0.10, 0.90, 0.95), (0.30, 0.50, 0.90)];
+/// On QUIC with mixed reliability a lost datagram loses one message; the ballot relay
+/// and the asks for a missing vote make up for it: at 10 % 100 % in every run, at 30 %
+/// 80.8–100 % in nine of ten runs here (median 93.9; without asks 75.8–90.9 in five, and
+/// 42.4 % in one of CI's). What they cannot make up for is a link that delivers nothing
+/// for a few ticks (QUIC's congestion control under heavy loss holds datagrams back):
+/// then a robot decides on its own vote alone, as in the tenth run (51.5 %). The bound at
+/// 30 % leaves room for such a stall.
+const QUIC: [Phase; 3] = [(0.0, 0.98, 0.97), (0.10, 0.95, 0.95), (0.30, 0.40, 0.90)];
 
 /// True when this machine cannot drop packets between namespaces (said loudly; where
 /// SPWI_REQUIRE_NETNS is set, a failure instead).
@@ -111,16 +115,28 @@ async fn lose_packets(net: &LossyNetwork, hub: &Hub, protocol: &str, metadata: &
         let by = collector.by_robot();
         let decided: Vec<f64> =
             ids.iter().map(|r| by.get(r).map_or(0, |m| m.range(from..=to).count()) as f64 / ticks).collect();
+        // Robots that counted the same ballots (the same digest) decide the same: what
+        // disagreement there is comes from votes lost on the way.
+        let (mut same_ballots, mut same_ballots_differ) = (0, 0);
+        for t in from..=to {
+            let Some(ds) = ids.iter().map(|r| by.get(r)?.get(&t)).collect::<Option<Vec<_>>>() else { continue };
+            if ds.iter().all(|d| d.digest == ds[0].digest) {
+                same_ballots += 1;
+                same_ballots_differ += usize::from(ds.iter().any(|d| d.steps != ds[0].steps));
+            }
+        }
         eprintln!(
             "{protocol}: {:.0} % of packets between robots dropped: one decision on {:.1} % of {common} common ticks; \
-             each robot decided {:?} of {ticks} ticks",
+             each robot decided {:?} of {ticks} ticks; the same ballots counted on {:.1} %",
             loss * 100.0,
             agreement * 100.0,
-            decided.iter().map(|d| format!("{:.1} %", d * 100.0)).collect::<Vec<_>>()
+            decided.iter().map(|d| format!("{:.1} %", d * 100.0)).collect::<Vec<_>>(),
+            same_ballots as f64 / ticks * 100.0
         );
         for (r, d) in ids.iter().zip(&decided) {
             assert!(*d >= least_decided, "{r} decided {:.1} % of ticks at {loss} loss over {protocol}", d * 100.0);
         }
+        assert_eq!(same_ballots_differ, 0, "robots that counted the same ballots decided differently at {loss} loss");
         assert!(
             agreement >= least_agreement,
             "one decision on {:.1} % of ticks at {loss} loss over {protocol}, at least {least_agreement} expected",

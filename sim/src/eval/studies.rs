@@ -504,8 +504,9 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
     let _ = writeln!(w, "\n## Beyond the paper: faults (scenario 3, 4 robots, 2 s → 2 s)\n");
     let _ = writeln!(
         w,
-        "Each fault three times: with the paper's protocol (each vote sent once, every feed believed, the paper's consensus rule) and with ours (`[tick]` defaults: the ballots each robot holds relayed {} ms into the tick, a camera repeating the same worker detection {} times set aside, peers trusted below {} left out of the fusion; `agent/src/engine.rs`) under each consensus rule: *paper* (normalised shares of visibility and confidence) and *trust* (each vote's log-likelihood ratio weighted by the voter's agreement with the others over the last {} decided ticks and by its view of the worker; `agent/src/consensus.rs`, `agent/src/trust.rs`). The daemon's default rule is `{}`. *Healthy collective*: the collective GRU of the robots whose camera works. Messages and bytes: what each robot publishes per tick.\n",
+        "Each fault three times: with the paper's protocol (each vote sent once, every feed believed, the paper's consensus rule) and with ours (`[tick]` defaults: the ballots each robot holds relayed {} ms into the tick and sent up to {} times from then to the deadline by a robot still missing a vote, a camera repeating the same worker detection {} times set aside, peers trusted below {} left out of the fusion; `agent/src/engine.rs`) under each consensus rule: *paper* (normalised shares of visibility and confidence) and *trust* (each vote's log-likelihood ratio weighted by the voter's agreement with the others over the last {} decided ticks and by its view of the worker; `agent/src/consensus.rs`, `agent/src/trust.rs`). The daemon's default rule is `{}`. *Healthy collective*: the collective GRU of the robots whose camera works. Messages and bytes: what each robot publishes per tick.\n",
         TickConfig::default().relay_ms,
+        TickConfig::default().ask_rounds,
         TickConfig::default().stale_after_frames,
         TickConfig::default().fuse_min_trust,
         TickConfig::default().trust_window_ticks,
