@@ -40,7 +40,7 @@ const RTO_MIN: &str = "5ms";
 const TCP_LINUX_RTO: [Phase; 3] = [(0.0, 0.98, 0.97), (0.10, 0.0, 0.95), (0.30, 0.0, 0.90)];
 /// On QUIC with mixed reliability a lost datagram loses one message; the ballot relay
 /// and the asks for a missing vote make up for it: at 10 % 100 % in every run, at 30 %
-/// 80.8–100 % in nine of ten runs here (median 93.9; without asks 75.8–90.9 in five, and
+/// 80.8–100 % in nine of ten runs here (median 93.4; without asks 75.8–90.9 in five, and
 /// 42.4 % in one of CI's). What they cannot make up for is a link that delivers nothing
 /// for a few ticks (QUIC's congestion control under heavy loss holds datagrams back):
 /// then a robot decides on its own vote alone, as in the tenth run (51.5 %). The bound at
