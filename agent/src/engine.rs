@@ -774,7 +774,7 @@ impl Engine {
         if due == 0 {
             return;
         }
-        let relay = tick.rounds == 0 && self.relays(t) && !tick.votes.is_empty();
+        let relay = self.owes_relay(t);
         // Not at the relay time itself: the relays of that moment are still on their way.
         let ask = tick.rounds + due as u32 > 1 && self.waits_for_a_vote(tick);
         let tick = self.open.get_mut(&t).expect("open");
@@ -786,6 +786,12 @@ impl Engine {
             let votes = tick.votes.values().cloned().collect();
             out.push(self.ballots(t, votes));
         }
+    }
+
+    /// We relay open tick `t`, hold votes to relay, and its relay time is yet to pass.
+    fn owes_relay(&self, t: u64) -> bool {
+        let tick = &self.open[&t];
+        self.cfg.relay_after.is_some() && tick.rounds == 0 && self.relays(t) && !tick.votes.is_empty()
     }
 
     fn ballots(&self, tick: u64, votes: Vec<VoteMsg>) -> Output {
@@ -809,9 +815,8 @@ impl Engine {
     fn decide(&mut self, t: u64, by: DecidedBy, now: Duration, out: &mut Vec<Output>) {
         // Deciding before the relay time: if we relay the tick, the ballots we hold go
         // out now, since a peer that lost one of them may still be waiting.
-        let tick = &self.open[&t];
-        if self.cfg.relay_after.is_some() && tick.rounds == 0 && self.relays(t) && !tick.votes.is_empty() {
-            let votes = tick.votes.values().cloned().collect();
+        if self.owes_relay(t) {
+            let votes = self.open[&t].votes.values().cloned().collect();
             out.push(self.ballots(t, votes));
         }
         let mut tick = self.open.remove(&t).expect("open");
