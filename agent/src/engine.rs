@@ -599,8 +599,8 @@ impl Engine {
             let missed = b.votes.iter().filter(|v| v.robot != self.cfg.robot && !ours.voters.contains(&v.robot));
             self.metrics.late_relayed_ballots += missed.count() as u64;
         }
+        self.answer(&b, out);
         let me = self.cfg.robot.clone();
-        let theirs: BTreeSet<RobotId> = b.votes.iter().map(|v| v.robot.clone()).collect();
         let usable: Vec<VoteMsg> =
             b.votes.into_iter().filter(|v| v.robot != me && !self.peer_is_stale(&v.robot)).collect();
         if let Some(tick) = self.accept_peer(&b.robot, b.instance, b.tick, now) {
@@ -613,24 +613,23 @@ impl Engine {
             }
             self.metrics.relayed_ballots_used += used;
         }
-        self.answer(&b.robot, b.tick, &theirs, out);
         self.advance(b.tick, now, out);
     }
 
     /// A peer's ballots list every vote it holds for their tick: if they lack one we
     /// hold (not the peer's own) and we relay the tick, we answer with ours, at most
     /// `ask_rounds` times a tick, also once we decided it.
-    fn answer(&mut self, peer: &RobotId, t: u64, theirs: &BTreeSet<RobotId>, out: &mut Vec<Output>) {
+    fn answer(&mut self, theirs: &BallotsMsg, out: &mut Vec<Output>) {
+        let t = theirs.tick;
         if self.cfg.relay_after.is_none() || !self.relays(t) {
             return;
         }
         let Some(tick) = self.open.get_mut(&t).or_else(|| self.settled.get_mut(&t)) else { return };
-        let lack = tick.votes.keys().any(|r| r != peer && !theirs.contains(r));
-        if lack && tick.answers < self.cfg.ask_rounds {
+        let held = |r: &RobotId| *r == theirs.robot || theirs.votes.iter().any(|v| v.robot == *r);
+        if tick.answers < self.cfg.ask_rounds && !tick.votes.keys().all(held) {
             tick.answers += 1;
             self.metrics.ballot_answers += 1;
-            let votes = tick.votes.values().cloned().collect();
-            out.push(self.ballots(t, votes));
+            out.push(ballots(&self.cfg, t, &tick.votes));
         }
     }
 
@@ -680,7 +679,7 @@ impl Engine {
         let decision_due = now >= tick.started + self.cfg.decision_deadline;
 
         // Relay, then ask: partway through the tick, the ballots we hold go to every peer.
-        self.ask_rounds(t, now, out);
+        self.run_rounds(t, now, out);
 
         // The decision, once our frame is in and every active member voted or abstained.
         let tick = &self.open[&t];
@@ -768,7 +767,7 @@ impl Engine {
     /// first, the relay time, the tick's relayers publish the ballots they hold (nothing
     /// when they hold none); at each later one, a robot still waiting for a member's
     /// vote publishes them, an ask.
-    fn ask_rounds(&mut self, t: u64, now: Duration, out: &mut Vec<Output>) {
+    fn run_rounds(&mut self, t: u64, now: Duration, out: &mut Vec<Output>) {
         let tick = &self.open[&t];
         let due = (tick.rounds..).take_while(|&k| self.round_time(tick, k).is_some_and(|at| now >= at)).count();
         if due == 0 {
@@ -783,8 +782,7 @@ impl Engine {
             if ask && !relay {
                 self.metrics.ballot_asks += 1;
             }
-            let votes = tick.votes.values().cloned().collect();
-            out.push(self.ballots(t, votes));
+            out.push(ballots(&self.cfg, t, &tick.votes));
         }
     }
 
@@ -792,10 +790,6 @@ impl Engine {
     fn owes_relay(&self, t: u64) -> bool {
         let tick = &self.open[&t];
         self.cfg.relay_after.is_some() && tick.rounds == 0 && self.relays(t) && !tick.votes.is_empty()
-    }
-
-    fn ballots(&self, tick: u64, votes: Vec<VoteMsg>) -> Output {
-        Output::Ballots(BallotsMsg { robot: self.cfg.robot.clone(), instance: self.cfg.instance, tick, votes })
     }
 
     /// Whether we relay tick `t`'s ballots. Every member holding them relaying them
@@ -816,8 +810,7 @@ impl Engine {
         // Deciding before the relay time: if we relay the tick, the ballots we hold go
         // out now, since a peer that lost one of them may still be waiting.
         if self.owes_relay(t) {
-            let votes = self.open[&t].votes.values().cloned().collect();
-            out.push(self.ballots(t, votes));
+            out.push(ballots(&self.cfg, t, &self.open[&t].votes));
         }
         let mut tick = self.open.remove(&t).expect("open");
         let t0 = Instant::now();
@@ -869,6 +862,12 @@ impl Engine {
             tick.peer_verdicts.insert(peer.clone(), theirs);
         }
     }
+}
+
+/// Our Ballots message for tick `t`: every vote we hold for it.
+fn ballots(cfg: &EngineConfig, t: u64, held: &BTreeMap<RobotId, VoteMsg>) -> Output {
+    let votes = held.values().cloned().collect();
+    Output::Ballots(BallotsMsg { robot: cfg.robot.clone(), instance: cfg.instance, tick: t, votes })
 }
 
 /// Counts one comparison of our verdict of a tick with a peer's.
