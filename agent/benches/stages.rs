@@ -105,7 +105,7 @@ fn bench_backend(backend: Backend) {
         .map(|(r, s)| Ballot { robot: r, visibility: 5, trust: 0.9, quality: 0.8, steps: s })
         .collect();
     measure("learning trust (8 voters, H+1 steps)", 20_000, || {
-        book.learn(black_box(&ballots), Rule::Trust);
+        book.learn(black_box(&ballots));
     });
     let mut engine = Engine::new(
         EngineConfig {
@@ -121,6 +121,7 @@ fn bench_backend(backend: Backend) {
             relayers: 4,
             ask_rounds: 2,
             stale_after: 0, // the bench repeats one frame on purpose
+            window: Default::default(),
         },
         set.inference(TemporalModel::Collective).unwrap(),
     );
@@ -130,7 +131,7 @@ fn bench_backend(backend: Backend) {
         measure(&format!("whole tick ({objects} objects, alone)"), 3_000, || {
             tick += 1;
             let mut f = template.clone(); // a copy, as a received frame would be
-            f.tick = tick;
+            f.capture_us = DetectionFrame::capture_at_tick(tick);
             black_box(engine.handle(Input::Frame(f), Duration::from_millis(tick * 100)));
         });
     }
@@ -146,7 +147,7 @@ fn bench_codec() {
         tick: 7,
         steps: vec![StepVote { class: Station::Assembly, confidence: 0.7 }; 21],
         visibility: 13,
-        trust: 0.9,
+        worker: None,
         quality: 0.8,
         signature: Vec::new(),
     };

@@ -55,6 +55,18 @@ pub struct TickConfig {
     pub trust_floor: f32,
     /// Peers trusted less than this leave the fusion of embeddings and worker tracks.
     pub fuse_min_trust: f32,
+    /// Voters trusted less than this are not counted while a voter trusted more is,
+    /// and never decide a tick alone while a trusted member is live.
+    pub count_min_trust: f32,
+    /// How many ticks behind our clock's a frame or a peer's message is still taken
+    /// (late ones); the window must reach past the decision deadline.
+    pub accept_past_ticks: u64,
+    /// How many ticks ahead of our clock's a frame or a peer's message is taken (hosts
+    /// whose clocks run a little ahead).
+    pub accept_ahead_ticks: u64,
+    /// Shifts this robot's clock (ms). 0 on a real robot, whose host clock chrony or
+    /// PTP keeps in step; tests and benchmarks shift one robot to see what it costs.
+    pub clock_offset_ms: i64,
     /// Most ticks in flight at once.
     pub max_open_ticks: usize,
     /// Capacity of the event queue between Zenoh and the tick loop.
@@ -89,11 +101,20 @@ pub struct ModelsConfig {
     pub ort_library: Option<PathBuf>,
 }
 
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct HttpConfig {
     /// Address for `/healthz`, `/status` and `/metrics`; none to serve nothing.
     pub listen: Option<SocketAddr>,
+    /// `/healthz` answers 503 when frames arrive but no tick was decided for this long
+    /// (ms), so that an orchestrator can restart the robot's daemon or raise an alert.
+    pub unhealthy_after_ms: u64,
+}
+
+impl Default for HttpConfig {
+    fn default() -> Self {
+        HttpConfig { listen: None, unhealthy_after_ms: 3000 }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -125,6 +146,10 @@ impl Default for TickConfig {
             trust_window_ticks: 100,
             trust_floor: 0.1,
             fuse_min_trust: 0.5,
+            count_min_trust: 0.5,
+            accept_past_ticks: 5,
+            accept_ahead_ticks: 2,
+            clock_offset_ms: 0,
             max_open_ticks: 64,
             event_queue: 1024,
         }
@@ -144,7 +169,7 @@ impl Default for LogConfig {
 }
 
 /// The environment variables that override the file, and the field each sets.
-pub const ENV_OVERRIDES: [(&str, &str); 7] = [
+pub const ENV_OVERRIDES: [(&str, &str); 8] = [
     ("SPWI_MODELS_DIR", "models.dir"),
     ("SPWI_BACKEND", "models.backend"),
     ("SPWI_ORT_LIBRARY", "models.ort_library"),
@@ -152,6 +177,7 @@ pub const ENV_OVERRIDES: [(&str, &str); 7] = [
     ("SPWI_TEMPORAL", "tick.temporal"),
     ("SPWI_DECISION_DEADLINE_MS", "tick.decision_deadline_ms"),
     ("SPWI_LOG_FORMAT", "log.format"),
+    ("SPWI_CLOCK_OFFSET_MS", "tick.clock_offset_ms"),
 ];
 
 impl AgentConfig {
@@ -193,6 +219,7 @@ impl AgentConfig {
                 "SPWI_TEMPORAL" => self.tick.temporal = enum_value(var, &v)?,
                 "SPWI_DECISION_DEADLINE_MS" => self.tick.decision_deadline_ms = parse(var, &v)?,
                 "SPWI_LOG_FORMAT" => self.log.format = enum_value(var, &v)?,
+                "SPWI_CLOCK_OFFSET_MS" => self.tick.clock_offset_ms = parse(var, &v)?,
                 _ => unreachable!("every override is handled"),
             }
         }
@@ -231,10 +258,34 @@ impl AgentConfig {
         if !(1..=100_000).contains(&t.trust_window_ticks) {
             bail!("tick.trust_window_ticks = {}: must be within 1..=100000", t.trust_window_ticks);
         }
-        for (name, v) in [("tick.trust_floor", t.trust_floor), ("tick.fuse_min_trust", t.fuse_min_trust)] {
+        for (name, v) in [
+            ("tick.trust_floor", t.trust_floor),
+            ("tick.fuse_min_trust", t.fuse_min_trust),
+            ("tick.count_min_trust", t.count_min_trust),
+        ] {
             if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
                 bail!("{name} = {v}: must be within 0..=1");
             }
+        }
+        if !(1..=600).contains(&t.accept_past_ticks) {
+            bail!("tick.accept_past_ticks = {}: must be within 1..=600", t.accept_past_ticks);
+        }
+        if t.accept_ahead_ticks > 600 {
+            bail!("tick.accept_ahead_ticks = {}: must be within 0..=600", t.accept_ahead_ticks);
+        }
+        let reach_ms = t.accept_past_ticks * spwi_proto::TICK_PERIOD.as_millis() as u64;
+        if t.decision_deadline_ms >= reach_ms {
+            bail!(
+                "tick.accept_past_ticks = {}: the window reaches {reach_ms} ms back, not past tick.decision_deadline_ms ({}): a tick would leave the window before its deadline",
+                t.accept_past_ticks,
+                t.decision_deadline_ms
+            );
+        }
+        if t.clock_offset_ms.unsigned_abs() > 3_600_000 {
+            bail!("tick.clock_offset_ms = {}: must be within ±3600000 (one hour)", t.clock_offset_ms);
+        }
+        if !(100..=3_600_000).contains(&self.http.unhealthy_after_ms) {
+            bail!("http.unhealthy_after_ms = {}: must be within 100..=3600000", self.http.unhealthy_after_ms);
         }
         if !(1..=10_000).contains(&t.max_open_ticks) {
             bail!("tick.max_open_ticks = {}: must be within 1..=10000", t.max_open_ticks);
@@ -291,6 +342,12 @@ mod tests {
         let c: AgentConfig = toml::from_str("[tick]\nask_rounds = 11\n").unwrap();
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("tick.ask_rounds = 11") && e.contains("0..=10"), "{e}");
+        let c: AgentConfig = toml::from_str("[tick]\naccept_past_ticks = 1\ndecision_deadline_ms = 150\n").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("tick.accept_past_ticks = 1") && e.contains("not past tick.decision_deadline_ms (150)"),
+            "{e}"
+        );
         let c: AgentConfig = toml::from_str("[tick]\nask_rounds = 0\n").unwrap();
         c.validate().expect("never asking is allowed");
         let c: AgentConfig = toml::from_str("[tick]\ntrust_floor = 1.5\n").unwrap();

@@ -24,13 +24,15 @@
 //! ```
 //!
 //! with c_i clamped to [1/K, 0.99] (no vote is negative evidence, none is proof, so one
-//! sure voter outweighs at most a few unsure ones), trust_i the share of the voter's
-//! recent votes that agreed with the decision of the *others*, in [floor, 1]
-//! ([`crate::trust`]), and quality_i how well it sees the worker.
+//! sure voter outweighs at most a few unsure ones), trust_i what the *receiver* has
+//! learned of the voter — the share of its recent votes that agreed with the decision
+//! of the others, times the share of its worker estimates that agreed with theirs, in
+//! [floor, 1] ([`crate::trust`]) — and quality_i how well the voter says it sees the
+//! worker (at most 1: it can lower a vote's weight, never raise it above a full view).
 //!
 //! Ballots are summed in robot-id order and ties go to the lowest class id, so every
-//! robot holding the same votes reaches the same decision, bit for bit, whatever order
-//! the votes arrived in; trust and quality travel inside the ballots for that reason.
+//! robot holding the same votes and weights reaches the same decision, bit for bit,
+//! whatever order the votes arrived in.
 
 use crate::vote::argmax;
 use spwi_proto::{RobotId, Station, StepVote, TeamStep, VoteMsg, NUM_CLASSES};
@@ -45,9 +47,10 @@ pub struct Ballot<'a> {
     pub steps: &'a [StepVote],
 }
 
-impl<'a> From<&'a VoteMsg> for Ballot<'a> {
-    fn from(v: &'a VoteMsg) -> Self {
-        Ballot { robot: &v.robot, visibility: v.visibility, trust: v.trust, quality: v.quality, steps: &v.steps }
+impl<'a> Ballot<'a> {
+    /// Vote `v` weighed by `trust`, what its receiver learned of the voter.
+    pub fn of(v: &'a VoteMsg, trust: f32) -> Self {
+        Ballot { robot: &v.robot, visibility: v.visibility, trust, quality: v.quality, steps: &v.steps }
     }
 }
 
@@ -139,69 +142,6 @@ pub fn decide_sorted(ballots: &[Ballot<'_>], rule: Rule) -> Vec<TeamStep> {
             TeamStep { class: Station::ALL[k], score: score[k] }
         })
         .collect()
-}
-
-/// Each ballot's agreement with the decision the *other* ballots reach under `rule`:
-/// (its steps whose class is theirs, its steps compared), in the ballots' order, which
-/// must be by robot as [`decide`] leaves them. What [`crate::trust`] learns from.
-///
-/// The same as [`decide_sorted`] over the others of each ballot, bit for bit (the tests
-/// hold it to that), but under the trust rule a vote's weight does not depend on the
-/// others', so each weight — a logarithm — is computed once rather than once per ballot
-/// left out, and nothing is allocated per ballot: n voters cost n² additions a step
-/// instead of n decisions.
-pub fn agreement_with_the_others(ballots: &[Ballot<'_>], rule: Rule) -> Vec<(usize, usize)> {
-    let n = ballots.len();
-    match rule {
-        Rule::Paper(_) => {
-            // The paper's weights are shares of the voters counted: decide without each.
-            let mut others = Vec::with_capacity(n.saturating_sub(1));
-            ballots
-                .iter()
-                .enumerate()
-                .map(|(i, b)| {
-                    others.clear();
-                    others.extend(ballots.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, o)| *o));
-                    agreement(b, decide_sorted(&others, rule).iter().map(|t| t.class))
-                })
-                .collect()
-        }
-        Rule::Trust => {
-            let steps = ballots.iter().map(|b| b.steps.len()).max().unwrap_or(0);
-            // The longest ballot of the others of ballot i: how many steps they decide.
-            let theirs_len =
-                |i: usize| ballots.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, o)| o.steps.len()).max();
-            // raw[h * n + j]: ballot j's weight at step h (0 where it has no step h)
-            let raw: Vec<f32> = (0..steps)
-                .flat_map(|h| ballots.iter().map(move |b| if h < b.steps.len() { trust_weight(b, h) } else { 0.0 }))
-                .collect();
-            let mut w = Vec::with_capacity(n);
-            ballots
-                .iter()
-                .enumerate()
-                .map(|(i, b)| {
-                    let counted = move |h: usize| (0..n).filter(move |&j| j != i && h < ballots[j].steps.len());
-                    let theirs = (0..theirs_len(i).unwrap_or(0)).map(|h| {
-                        w.clear();
-                        w.extend(counted(h).map(|j| raw[h * n + j]));
-                        normalise(&mut w);
-                        let mut score = [0.0f32; NUM_CLASSES];
-                        for (j, wj) in counted(h).zip(&w) {
-                            score[ballots[j].steps[h].class.index()] += wj;
-                        }
-                        Station::ALL[argmax(&score)]
-                    });
-                    agreement(b, theirs)
-                })
-                .collect()
-        }
-    }
-}
-
-/// (steps of `b` whose class is the one `theirs` gives, steps compared).
-fn agreement(b: &Ballot<'_>, theirs: impl Iterator<Item = Station>) -> (usize, usize) {
-    // `zip` asks `theirs` for a step only while `b` has one.
-    b.steps.iter().zip(theirs).fold((0, 0), |(agreed, judged), (s, t)| (agreed + usize::from(s.class == t), judged + 1))
 }
 
 /// A digest of the ballots, sorted by robot as [`decide`] leaves them: FNV-1a over each
@@ -371,51 +311,6 @@ mod tests {
         let less_trusted = [ab[0], Ballot { trust: 0.5, ..ab[1] }];
         assert_ne!(digest(&ab), digest(&less_trusted), "a trust that differs, another digest");
         assert_eq!(digest(&[]), 0xcbf2_9ce4_8422_2325, "FNV-1a's offset basis: fixed across builds");
-    }
-
-    #[test]
-    fn agreement_with_the_others_is_each_ballots_agreement_with_the_decision_without_it() {
-        // Random ballots of 2-9 voters, steps of unequal length, and trusts, qualities
-        // and confidences from a few values so that weights tie and zero out often.
-        let ids: Vec<RobotId> = (0..9).map(|i| id(&format!("r{i}"))).collect();
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut pick = |k: usize| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state % k as u64) as usize
-        };
-        for _ in 0..2000 {
-            let n = 2 + pick(8);
-            let steps: Vec<Vec<StepVote>> = (0..n)
-                .map(|_| {
-                    let len = 1 + pick(4);
-                    (0..len).map(|_| sv(Station::ALL[pick(NUM_CLASSES)], [0.1, 0.25, 0.5, 0.8, 1.0][pick(5)])).collect()
-                })
-                .collect();
-            let ballots: Vec<Ballot<'_>> = (0..n)
-                .map(|i| Ballot {
-                    robot: &ids[i],
-                    visibility: pick(4) as u32,
-                    trust: [0.0, 0.5, 1.0][pick(3)],
-                    quality: [0.0, 0.7, 1.0][pick(3)],
-                    steps: &steps[i],
-                })
-                .collect();
-            for rule in [PAPER, Rule::Trust] {
-                let by_decision: Vec<(usize, usize)> = (0..n)
-                    .map(|i| {
-                        let others: Vec<Ballot<'_>> =
-                            ballots.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, b)| *b).collect();
-                        let theirs = decide_sorted(&others, rule);
-                        let judged = ballots[i].steps.len().min(theirs.len());
-                        let agreed = ballots[i].steps.iter().zip(&theirs).filter(|(s, t)| s.class == t.class).count();
-                        (agreed, judged)
-                    })
-                    .collect();
-                assert_eq!(agreement_with_the_others(&ballots, rule), by_decision, "{rule:?}: {ballots:?}");
-            }
-        }
     }
 
     #[test]

@@ -48,24 +48,38 @@
 //! it decided on fewer ballots, without any robot hearing every peer's decisions (the
 //! decisions still go out, for observers: n − 1 fewer messages into each robot a tick).
 //!
-//! Each tick also teaches the robot whom to trust ([`crate::trust`]): every voter is
-//! judged against the decision the others reach without it, and every robot's estimate
-//! of the worker against the others' (one that most of them contradict also leaves
-//! this tick's team track at once). Our own trust goes out in our votes, so that under
-//! the trust rule every robot weighs a ballot alike; the trust we learn of a peer
-//! decides whether we fuse its embedding and worker estimate.
+//! Each decision also teaches the robot whom to trust ([`crate::trust`]): every voter
+//! is judged against the decision the others reach without it, and the worker estimate
+//! inside its ballot against the other ballots' (one that most of them contradict also
+//! leaves this tick's team track at once). Nothing a voter says of itself raises its
+//! weight: the trust rule weighs each ballot by the trust its receiver learned, and
+//! since that is learned from the ballots decided on alone, robots that counted the
+//! same ballots weigh them alike. The same trust decides whether we fuse a peer's
+//! embedding and worker estimate.
 //!
 //! A feed that repeats itself is set aside ([`crate::stale`]): our own frames showing
 //! the worker identically `stale_after` times in a row count as not seeing the worker
 //! (no embedding, no track, no vote) until they change; a peer whose embedding repeats
 //! as often is heard as abstaining, its votes and floor estimates left out.
 //!
-//! Deadlines run from the first thing this robot heard about the tick (its own frame
-//! or a peer's message), so a robot whose own frame is lost still decides from its
-//! peers' votes when the deadline passes. Membership decides whom to wait for: live
-//! members (liveliness) that have spoken at least once ("counted from the first vote"),
-//! so a peer that joins never stalls a tick, and one that leaves is not waited for.
+//! Time is the fleet's clock, never a peer's word ([`crate::clock`]): `now` is the
+//! robot's synchronised wall clock (time since the Unix epoch; an injected one in the
+//! evaluation and a replay), a tick is one of its 100 ms periods, and every frame is
+//! stamped with the time it was captured. A frame or a peer's message is taken only for
+//! a tick within [`TickWindow`] of `now`; others are refused and counted by reason, so
+//! no tick number — huge, repeated, going backwards — can open ticks for the team or
+//! block the ones that follow, and a restarted frame source goes on at the current
+//! tick. A tick's deadline runs from the first thing this robot heard of it, but never
+//! from before the tick starts on its own clock: a peer that opens ticks early moves no
+//! deadline. What is remembered of decided ticks reaches back as far as the window.
+//!
+//! Membership decides whom to wait for: live members (liveliness) that have spoken at
+//! least once ("counted from the first vote"), so a peer that joins never stalls a
+//! tick, and one that leaves is not waited for. A vote relayed by a peer counts only if
+//! its origin is a live member and the vote is of the origin's live instance (the one
+//! we hear from directly); the origin's own copy replaces a relayed one.
 
+use crate::clock::TickWindow;
 use crate::config::ConsensusRule;
 use crate::consensus::{self, Ballot, Rule, Weights};
 use crate::floor::{self, CameraCalibration, FloorView, StationMap, RELATION_DIM};
@@ -116,6 +130,8 @@ pub struct EngineConfig {
     /// (0: never).
     #[serde(default)]
     pub stale_after: u32,
+    /// The ticks around `now` a frame or a peer's message may be for.
+    pub window: TickWindow,
 }
 
 impl EngineConfig {
@@ -146,6 +162,7 @@ impl EngineConfig {
                 window: tick.trust_window_ticks,
                 floor: tick.trust_floor,
                 fuse_above: tick.fuse_min_trust,
+                count_above: tick.count_min_trust,
             },
             max_open_ticks: tick.max_open_ticks,
             camera: camera.clone(),
@@ -153,6 +170,7 @@ impl EngineConfig {
             relayers: tick.relayers as usize,
             ask_rounds: tick.ask_rounds,
             stale_after: tick.stale_after_frames,
+            window: TickWindow { past: tick.accept_past_ticks, ahead: tick.accept_ahead_ticks },
         }
     }
 }
@@ -175,6 +193,18 @@ pub enum Input {
     MemberLeft(RobotId),
     /// Time passed: deadlines may have expired.
     Poll,
+}
+
+impl Input {
+    /// The tick the input is for, if it names one.
+    pub fn tick(&self) -> Option<u64> {
+        match self {
+            Input::Frame(f) => Some(f.tick()),
+            Input::Embedding(e) => Some(e.tick),
+            Input::Ballots(b) => Some(b.tick),
+            Input::Map(_) | Input::MemberJoined(_) | Input::MemberLeft(_) | Input::Poll => None,
+        }
+    }
 }
 
 /// What the robot publishes.
@@ -265,8 +295,6 @@ fn relay_rank(tick: u64, robot: &RobotId) -> u64 {
     h ^ (h >> 31)
 }
 
-/// How many decided ticks are remembered to recognise late messages.
-const DECIDED_MEMORY: u64 = 1024;
 /// Decided ticks whose ballots we keep to answer peers still deciding them (a tick is
 /// decided within its deadline, well before the next but one starts).
 const ANSWERED_TICKS: usize = 2;
@@ -301,6 +329,15 @@ pub struct Engine {
     metrics: Metrics,
     /// Instance ids of other daemons seen using our robot id.
     duplicates: BTreeSet<u64>,
+    /// Each live peer's instance, as it last spoke to us directly: the only one whose
+    /// relayed votes count.
+    instances: BTreeMap<RobotId, u64>,
+    /// How each live peer's ticks sit against our clock.
+    peer_clocks: BTreeMap<RobotId, crate::clock::PeerClock>,
+    /// How our own frames' capture times sit against our clock (µs, averaged).
+    own_frame_lag: crate::clock::PeerClock,
+    /// When we last logged a frame refused for its capture time (rate limit).
+    warned_off_clock: Option<Duration>,
     last_decision: Option<DecisionMsg>,
     /// Our latest verdict, until our next embedding message carries it.
     unshared_verdict: Option<Verdict>,
@@ -353,6 +390,10 @@ impl Engine {
             trust,
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
+            instances: BTreeMap::new(),
+            peer_clocks: BTreeMap::new(),
+            own_frame_lag: Default::default(),
+            warned_off_clock: None,
             last_decision: None,
             unshared_verdict: None,
             last_spatial: None,
@@ -361,6 +402,11 @@ impl Engine {
 
     pub fn config(&self) -> &EngineConfig {
         &self.cfg
+    }
+
+    /// How many steps ahead of t our votes forecast (the model set's horizon H).
+    pub fn horizon(&self) -> usize {
+        self.inference.set().manifest.horizon
     }
 
     /// Live members, this robot included, sorted.
@@ -426,9 +472,18 @@ impl Engine {
         Some(t.started + after + self.cfg.decision_deadline.saturating_sub(after) * k / (self.cfg.ask_rounds + 1))
     }
 
-    /// Handles one input at time `now` and returns what to publish, in order.
+    /// How the ticks of each live peer's messages sit against our clock: the offset
+    /// of its ticks' starts from when we heard them (ms, averaged; includes the link's
+    /// delay), and how many of its messages fell outside our window.
+    pub fn peer_clocks(&self) -> &BTreeMap<RobotId, crate::clock::PeerClock> {
+        &self.peer_clocks
+    }
+
+    /// Handles one input at time `now` (the fleet's clock, since the Unix epoch) and
+    /// returns what to publish, in order.
     pub fn handle(&mut self, input: Input, now: Duration) -> Vec<Output> {
         let mut out = Vec::new();
+        self.forget_the_past(now, &mut out);
         match input {
             Input::Frame(f) => self.on_frame(f, now, &mut out),
             Input::Embedding(e) => self.on_embedding(e, now, &mut out),
@@ -453,6 +508,8 @@ impl Engine {
             Input::MemberLeft(r) => {
                 self.live.remove(&r);
                 self.active.remove(&r);
+                self.instances.remove(&r);
+                self.peer_clocks.remove(&r);
                 self.peer_feeds.remove(&r); // a robot that comes back is judged afresh
                 self.peer_views.remove(&r);
                 self.advance_all(now, &mut out);
@@ -466,7 +523,14 @@ impl Engine {
         if f.robot != self.cfg.robot {
             return; // the daemon only subscribes to our own detections
         }
-        if self.is_decided(f.tick) || self.open.get(&f.tick).is_some_and(|t| t.own_frame.is_some()) {
+        let tick = f.tick();
+        if let Some(off) = self.cfg.window.refuses(tick, now) {
+            self.metrics.count_off_clock(off.frame());
+            self.warn_off_clock(&f, now);
+            return;
+        }
+        self.own_frame_lag.heard(tick, now);
+        if self.decided.contains_key(&tick) || self.open.get(&tick).is_some_and(|t| t.own_frame.is_some()) {
             self.metrics.stale_frames += 1;
             return;
         }
@@ -477,12 +541,12 @@ impl Engine {
         if stale != was_stale {
             if stale {
                 tracing::warn!(
-                    tick = f.tick,
+                    tick = tick,
                     repeats = self.cfg.stale_after,
                     "our camera repeats the same worker detection: a frozen feed; not voting until it changes"
                 );
             } else {
-                tracing::info!(tick = f.tick, "our camera's feed changes again: voting");
+                tracing::info!(tick = tick, "our camera's feed changes again: voting");
             }
         }
         if stale {
@@ -505,12 +569,12 @@ impl Engine {
                 self.metrics.observe(Stage::Gcn, t1.elapsed());
                 match r {
                     Ok(o) => {
-                        self.last_spatial = Some((f.tick, o.logits));
+                        self.last_spatial = Some((tick, o.logits));
                         Some(o.embedding)
                     }
                     Err(e) => {
                         self.metrics.model_errors += 1;
-                        tracing::error!(tick = f.tick, "GCN failed, not voting this tick: {e:#}");
+                        tracing::error!(tick = tick, "GCN failed, not voting this tick: {e:#}");
                         None
                     }
                 }
@@ -526,11 +590,11 @@ impl Engine {
         let will_vote = embedding.is_some() || (self.row_layout.reads_relations() && worker.is_some());
         let shared = embedding.clone();
         let own = OwnView { visibility, quality, embedding, keypoints, worker, facing, will_vote };
-        let vote = self.vote(f.tick, own);
+        let vote = self.vote(tick, own);
         out.push(Output::Embedding(EmbeddingMsg {
             robot: self.cfg.robot.clone(),
             instance: self.cfg.instance,
-            tick: f.tick,
+            tick: tick,
             embedding: shared,
             visibility,
             vote: vote.clone(),
@@ -540,17 +604,24 @@ impl Engine {
             verdict: self.unshared_verdict.take(),
         }));
         let me = self.cfg.robot.clone();
-        let tick = self.open_tick(f.tick, now);
-        tick.own_frame = Some(now);
+        let open = self.open_tick(tick, now);
+        open.own_frame = Some(now);
         if let Some(v) = vote {
-            tick.votes.insert(me, v.clone());
+            open.votes.insert(me, v.clone());
             out.push(Output::Vote(v));
         }
-        self.advance(f.tick, now, out);
+        self.advance(tick, now, out);
     }
 
     fn on_embedding(&mut self, mut e: EmbeddingMsg, now: Duration, out: &mut Vec<Output>) {
         let from_peer = e.robot != self.cfg.robot;
+        if !self.on_our_clock(&e.robot, e.tick, now) {
+            return;
+        }
+        if from_peer && self.live.contains(&e.robot) {
+            // What the peer says directly names its live instance.
+            self.instances.insert(e.robot.clone(), e.instance);
+        }
         if from_peer {
             self.peer_feeds.entry(e.robot.clone()).or_default().see(e.embedding.clone());
             if let Some(theirs) = e.verdict.take() {
@@ -575,9 +646,10 @@ impl Engine {
         }
         if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
             match e.vote {
-                // A stale peer is heard as one that abstains.
+                // A stale peer is heard as one that abstains. Its own copy of its vote
+                // wins over one a peer relayed.
                 Some(v) if !stale => {
-                    tick.votes.entry(e.robot.clone()).or_insert(v);
+                    tick.votes.insert(e.robot.clone(), v);
                 }
                 _ => {
                     tick.abstaining.insert(e.robot.clone());
@@ -590,6 +662,9 @@ impl Engine {
     /// A peer's relayed ballots: the votes we do not hold yet join the tick (never our
     /// own, never a stale peer's); for a tick already decided they are only counted.
     fn on_ballots(&mut self, b: BallotsMsg, now: Duration, out: &mut Vec<Output>) {
+        if !self.on_our_clock(&b.robot, b.tick, now) {
+            return;
+        }
         if b.robot == self.cfg.robot {
             // Our own relay (or another daemon's with our id, which this notes).
             self.accept_peer(&b.robot, b.instance, b.tick, now);
@@ -601,8 +676,13 @@ impl Engine {
         }
         self.answer(&b, out);
         let me = self.cfg.robot.clone();
-        let usable: Vec<VoteMsg> =
-            b.votes.into_iter().filter(|v| v.robot != me && !self.peer_is_stale(&v.robot)).collect();
+        let relayer = b.robot.clone();
+        let (usable, foreign): (Vec<VoteMsg>, Vec<VoteMsg>) = b
+            .votes
+            .into_iter()
+            .filter(|v| v.robot != me && !self.peer_is_stale(&v.robot))
+            .partition(|v| v.robot == relayer || self.is_live_instance(&v.robot, v.instance));
+        self.metrics.foreign_votes += foreign.len() as u64;
         if let Some(tick) = self.accept_peer(&b.robot, b.instance, b.tick, now) {
             let mut used = 0;
             for v in usable {
@@ -645,17 +725,72 @@ impl Engine {
             return None;
         }
         self.active.insert(robot.clone()); // even a late message shows the peer is there
-        if self.is_decided(tick) {
+        if self.decided.contains_key(&tick) {
             self.metrics.late_messages += 1;
             return None;
         }
         Some(self.open_tick(tick, now))
     }
 
-    fn is_decided(&self, tick: u64) -> bool {
-        self.decided.contains_key(&tick) || self.decided.keys().next().is_some_and(|&oldest| tick < oldest)
+    /// Whether a message of `robot` for `tick` is for a tick near our clock; one that
+    /// is not is refused and counted, and shows in the peer's clock record either way.
+    fn on_our_clock(&mut self, robot: &RobotId, tick: u64, now: Duration) -> bool {
+        let refused = self.cfg.window.refuses(tick, now);
+        if *robot != self.cfg.robot && self.live.contains(robot) {
+            let clock = self.peer_clocks.entry(robot.clone()).or_default();
+            match refused {
+                None => clock.heard(tick, now),
+                Some(_) => clock.refused += 1,
+            }
+        }
+        match refused {
+            Some(off) => {
+                self.metrics.count_off_clock(off.message());
+                false
+            }
+            None => true,
+        }
     }
 
+    /// Whether `instance` is the one `robot`, a live member, runs as far as we heard.
+    fn is_live_instance(&self, robot: &RobotId, instance: u64) -> bool {
+        self.live.contains(robot) && self.instances.get(robot).is_none_or(|&i| i == instance)
+    }
+
+    fn warn_off_clock(&mut self, f: &DetectionFrame, now: Duration) {
+        if self.warned_off_clock.is_some_and(|at| now.saturating_sub(at) < Duration::from_secs(5)) {
+            return;
+        }
+        self.warned_off_clock = Some(now);
+        if f.capture_us == 0 {
+            tracing::warn!("refused a frame without a capture time: its source must stamp capture_us (µs since the Unix epoch, on a synchronised clock)");
+        } else {
+            let by = crate::clock::signed_ms(Duration::from_micros(f.capture_us), now);
+            tracing::warn!(
+                tick = f.tick(),
+                "refused a frame captured {} ms {} our clock (the window takes {} ticks back, {} ahead): is the source's clock synchronised?",
+                by.unsigned_abs(),
+                if by < 0 { "behind" } else { "ahead of" },
+                self.cfg.window.past,
+                self.cfg.window.ahead
+            );
+        }
+    }
+
+    /// Forgets what lies behind the window: ticks still open there are decided with
+    /// what they hold (their deadline has passed), decided ones are forgotten.
+    fn forget_the_past(&mut self, now: Duration, out: &mut Vec<Output>) {
+        let oldest = self.cfg.window.oldest(now);
+        while let Some(&t) = self.open.keys().next().filter(|&&t| t < oldest) {
+            self.decide(t, DecidedBy::Deadline, now, out);
+        }
+        if self.decided.keys().next().is_some_and(|&t| t < oldest) {
+            self.decided = self.decided.split_off(&oldest);
+        }
+    }
+
+    /// Tick `t`, opened if it was not: its deadline runs from now, or from its start on
+    /// our clock if that is later.
     fn open_tick(&mut self, tick: u64, now: Duration) -> &mut Tick {
         if !self.open.contains_key(&tick) && self.open.len() >= self.cfg.max_open_ticks {
             if let Some((old, _)) = self.open.pop_first() {
@@ -663,7 +798,7 @@ impl Engine {
                 tracing::warn!(tick = old, "dropping an undecided tick: too many open");
             }
         }
-        self.open.entry(tick).or_insert_with(|| Tick::new(now))
+        self.open.entry(tick).or_insert_with(|| Tick::new(now.max(tick_start(tick))))
     }
 
     fn advance_all(&mut self, now: Duration, out: &mut Vec<Output>) {
@@ -697,8 +832,8 @@ impl Engine {
         let peers: Vec<(&RobotId, &PeerView)> =
             self.peer_views.iter().filter(|(_, v)| v.tick.abs_diff(t) <= PEER_VIEW_TICKS).collect();
         // Where each robot puts the worker this tick, ours first: an estimate most of
-        // the others contradict is left out of the team's track and counts against its
-        // robot's trust; so do peers we have learned to doubt.
+        // the others contradict is left out of the team's track, and so are peers we
+        // have learned to doubt.
         let me = &self.cfg.robot;
         let theirs = peers.iter().map(|(r, v)| (*r, v.tick, v.worker, v.facing));
         let held = floor::held_at(t, own.worker.map(|w| (me, w, own.facing)), theirs);
@@ -710,11 +845,6 @@ impl Engine {
         let fused_peers = if slots > 0 { team.kept_peers(&sightings, |i| robots[i] == me) } else { Vec::new() };
         let peers_mean =
             temporal::mean(peers.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, v)| v.embedding.as_deref()));
-        // Judged after the fusion above, which used the trust earned before this tick;
-        // the trust our vote carries below includes this judgement.
-        for (robot, ok) in robots.iter().zip(team.agrees.iter().flatten()) {
-            self.trust.learn_track(robot, *ok);
-        }
         self.floor.observe_worker(own.worker.as_ref(), team.track.as_ref());
         let will_vote = own.will_vote;
         // The ego model reads our own track, facing and map, the collective the team's.
@@ -746,8 +876,8 @@ impl Engine {
                 tick: t,
                 steps: vote::vote(&l, self.temperature),
                 visibility,
-                trust: self.trust.of(&self.cfg.robot),
                 quality,
+                worker: own.worker,
                 signature: Vec::new(), // the daemon signs what it publishes
             }),
             Err(e) => {
@@ -814,11 +944,21 @@ impl Engine {
         }
         let mut tick = self.open.remove(&t).expect("open");
         let t0 = Instant::now();
-        let mut ballots: Vec<Ballot<'_>> = tick.votes.values().map(Ballot::from).collect();
-        let steps = consensus::decide(&mut ballots, self.cfg.consensus);
-        let digest = consensus::digest(&ballots);
-        let voters: Vec<RobotId> = ballots.iter().map(|b| b.robot.clone()).collect();
-        self.trust.learn(&ballots, self.cfg.consensus);
+        // Each ballot weighs what we learned of its voter. Voters we doubt are set
+        // aside while one we trust votes, and never decide a tick for the team while
+        // a trusted member (we at least) is live: the tick then goes without a class.
+        let all: Vec<Ballot<'_>> = tick.votes.values().map(|v| Ballot::of(v, self.trust.weight(&v.robot))).collect();
+        let trusted = |b: &&Ballot<'_>| self.trust.counts(b.robot);
+        let anyone_trusted = all.iter().any(|b| trusted(&b)) || self.members().iter().any(|r| self.trust.counts(r));
+        let mut counted: Vec<Ballot<'_>> = all.iter().filter(|b| !anyone_trusted || trusted(b)).copied().collect();
+        let steps = consensus::decide(&mut counted, self.cfg.consensus);
+        let digest = consensus::digest(&counted);
+        let voters: Vec<RobotId> = counted.iter().map(|b| b.robot.clone()).collect();
+        self.metrics.votes_set_aside += (all.len() - counted.len()) as u64;
+        self.trust.learn(&all); // tick.votes is a map by robot: `all` is in robot order
+        let estimates: Vec<(&RobotId, &WorkerEstimate)> =
+            tick.votes.values().filter_map(|v| Some((&v.robot, v.worker.as_ref()?))).collect();
+        self.trust.learn_tracks(&estimates);
         self.metrics.observe(Stage::Consensus, t0.elapsed());
         if let Some(arrived) = tick.own_frame {
             self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(arrived));
@@ -847,9 +987,6 @@ impl Engine {
         }
         self.unshared_verdict = Some(ours.clone());
         self.decided.insert(t, ours);
-        while self.decided.len() as u64 > DECIDED_MEMORY {
-            self.decided.pop_first();
-        }
         self.last_decision = Some(d.clone());
         out.push(Output::Decision(d));
     }
@@ -886,6 +1023,7 @@ fn record_agreement(m: &mut Metrics, ours: &Verdict, theirs: &Verdict) {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::clock::OffClock;
     use crate::model::{Backend, ModelSet};
     use std::sync::Arc;
 
@@ -912,6 +1050,7 @@ pub(crate) mod tests {
             relayers: 4,
             ask_rounds: 2,
             stale_after: 5,
+            window: TickWindow::default(),
         };
         Engine::new(cfg, set.inference(TemporalModel::Collective).unwrap())
     }
@@ -922,7 +1061,7 @@ pub(crate) mod tests {
         let feat = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.1 + k + seed).sin()).collect::<Vec<_>>();
         DetectionFrame {
             robot: id(robot),
-            tick,
+            capture_us: DetectionFrame::capture_at_tick(tick),
             pose: None,
             image_size: [640.0, 480.0],
             human: seen.then(|| HumanDetection {
@@ -953,7 +1092,16 @@ pub(crate) mod tests {
 
     /// A vote as a trusted peer with a full view sends it.
     fn vote_msg(robot: &str, instance: u64, tick: u64, steps: Vec<StepVote>) -> VoteMsg {
-        VoteMsg { robot: id(robot), instance, tick, steps, visibility: 1, trust: 1.0, quality: 1.0, signature: vec![] }
+        VoteMsg {
+            robot: id(robot),
+            instance,
+            tick,
+            steps,
+            visibility: 1,
+            quality: 1.0,
+            worker: None,
+            signature: vec![],
+        }
     }
 
     /// A peer's share of a tick (instance 2, no landmarks): an embedding of `x`s if it
@@ -1064,14 +1212,14 @@ pub(crate) mod tests {
         let set = models();
         let mut a = engine("a", &set);
         a.handle(Input::MemberJoined(id("b")), ms(0));
-        a.handle(Input::Frame(frame("a", 1, true)), ms(0));
-        a.handle(abstaining("b", 1), ms(1));
-        let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
+        a.handle(Input::Frame(frame("a", 1, true)), ms(100));
+        a.handle(abstaining("b", 1), ms(101));
+        let out = a.handle(Input::Frame(frame("a", 2, true)), ms(200));
         take_vote(&out);
         assert!(decisions(&out).is_empty());
-        assert_eq!(a.next_deadline(), Some(ms(160)));
-        assert!(a.handle(Input::Poll, ms(159)).is_empty());
-        let out = a.handle(Input::Poll, ms(160));
+        assert_eq!(a.next_deadline(), Some(ms(260)));
+        assert!(a.handle(Input::Poll, ms(259)).is_empty());
+        let out = a.handle(Input::Poll, ms(260));
         assert_eq!(decisions(&out)[0].decided_by, DecidedBy::Deadline);
         assert_eq!(a.metrics.decisions_by_deadline, 1);
     }
@@ -1099,25 +1247,49 @@ pub(crate) mod tests {
         let set = models();
         let mut a = engine("a", &set);
         let ours = |instance| Input::Embedding(EmbeddingMsg { instance, ..share("a", 5, None, None, None) });
-        a.handle(ours(1), ms(0));
+        a.handle(ours(1), ms(500));
         assert!(a.duplicates.is_empty(), "our own echo is not a clash");
-        a.handle(ours(2), ms(0));
+        a.handle(ours(2), ms(500));
         assert_eq!(a.duplicates.iter().copied().collect::<Vec<_>>(), vec![2]);
         assert_eq!(a.metrics.duplicate_id_messages, 1);
     }
 
     #[test]
-    fn duplicate_frames_are_stale_and_open_ticks_are_bounded() {
+    fn ticks_off_our_clock_are_refused_and_counted_and_block_nothing() {
         let set = models();
         let mut a = engine("a", &set);
-        a.handle(Input::Frame(frame("a", 1, true)), ms(0));
-        assert!(a.handle(Input::Frame(frame("a", 1, true)), ms(1)).is_empty());
-        assert_eq!(a.metrics.stale_frames, 1);
-        for t in 100..120 {
-            a.handle(Input::Embedding(share("z", t, None, Some(one_step(Station::Storage)), None)), ms(2));
+        a.handle(Input::MemberJoined(id("z")), ms(0));
+        a.handle(Input::Frame(frame("a", 10, true)), ms(1000));
+        assert!(a.handle(Input::Frame(frame("a", 10, true)), ms(1001)).is_empty());
+        assert_eq!(a.metrics.stale_frames, 1, "the same tick's frame twice");
+        // At 1050 ms our clock is in tick 10: we take ticks 5..=12. A member floods a
+        // thousand messages for ticks far ahead, far behind, decided, and ahead of ours.
+        let flood = [1u64 << 62, u64::MAX, 13, 0, 4, 10, 11, 12];
+        for k in 0..1000 {
+            let t = flood[k % flood.len()];
+            a.handle(Input::Embedding(share("z", t, None, Some(one_step(Station::Storage)), None)), ms(1050));
         }
-        assert_eq!(a.open.len(), 8);
-        assert_eq!(a.metrics.evicted_ticks, 12);
+        let off = |a: &Engine, why| a.metrics.off_clock.get(&why).copied().unwrap_or(0);
+        assert_eq!(off(&a, OffClock::MessageTooNew), 375, "every message counted: 3 of 8 too far ahead");
+        assert_eq!(off(&a, OffClock::MessageTooOld), 250);
+        assert_eq!(a.metrics.late_messages, 125, "tick 10 is decided");
+        assert_eq!(a.open.keys().copied().collect::<Vec<_>>(), vec![11, 12], "only ticks near ours are open");
+        assert_eq!(a.peer_clocks()[&id("z")].refused, 625);
+        // z's early share of tick 11 moved no deadline: it runs from tick 11's start.
+        assert_eq!(a.next_deadline(), Some(ms(1160)));
+        // The ticks that follow are decided as they come, z's votes in.
+        for t in 11..=12 {
+            let d = a.handle(Input::Frame(frame("a", t, true)), ms(100 * t));
+            assert_eq!(decisions(&d)[0].voters, vec![id("a"), id("z")], "tick {t}");
+        }
+        // A frame without a capture time, or stamped a day off, is refused and counted.
+        for capture_us in [0, 86_400_000_000 + 1_300_000] {
+            assert!(a.handle(Input::Frame(DetectionFrame { capture_us, ..frame("a", 13, true) }), ms(1300)).is_empty());
+        }
+        assert_eq!((off(&a, OffClock::FrameTooOld), off(&a, OffClock::FrameTooNew)), (1, 1));
+        // What we remember of decided ticks reaches back as far as the window.
+        a.handle(Input::Poll, ms(5000));
+        assert!(a.decided.keys().all(|&t| t >= 45), "{:?}", a.decided.keys());
     }
 
     #[test]
@@ -1395,15 +1567,15 @@ pub(crate) mod tests {
         let set = models();
         let mut a = relaying("a", &set, Some(ms(40)));
         a.handle(Input::MemberJoined(id("b")), ms(0));
-        a.handle(Input::Embedding(share("b", 1, None, Some(one_step(Station::Workstation)), None)), ms(0));
-        a.handle(Input::Poll, ms(99)); // tick 1, opened by b's share, is decided
-                                       // b is an active member; a's own frame shows the worker at tick 2, b stays silent.
-        let out = a.handle(Input::Frame(frame("a", 2, true)), ms(100));
+        a.handle(Input::Embedding(share("b", 0, None, Some(one_step(Station::Workstation)), None)), ms(0));
+        a.handle(Input::Poll, ms(99)); // tick 0, opened by b's share, is decided
+                                       // b is an active member; a's own frame shows the worker at tick 1, b stays silent.
+        let out = a.handle(Input::Frame(frame("a", 1, true)), ms(100));
         assert!(out.iter().all(|o| !matches!(o, Output::Ballots(_))));
         assert_eq!(a.next_deadline(), Some(ms(140)), "the relay comes first");
         let out = a.handle(Input::Poll, ms(140));
         let Some(Output::Ballots(b)) = out.first() else { panic!("a relay at 40 ms: {out:?}") };
-        assert_eq!((b.tick, b.votes.len(), &b.votes[0].robot), (2, 1, &id("a")));
+        assert_eq!((b.tick, b.votes.len(), &b.votes[0].robot), (1, 1, &id("a")));
         // Still without b's vote, a asks for it, the asks spread to the deadline, then decides.
         let asks = a.cfg.ask_rounds;
         for k in 1..=asks {
@@ -1533,12 +1705,18 @@ pub(crate) mod tests {
         let mut a = engine("a", &set);
         let frozen = frame("a", 1, true);
         for t in 1..=4 {
-            let out = a.handle(Input::Frame(DetectionFrame { tick: t, ..frozen.clone() }), ms(100 * t));
+            let out = a.handle(
+                Input::Frame(DetectionFrame { capture_us: DetectionFrame::capture_at_tick(t), ..frozen.clone() }),
+                ms(100 * t),
+            );
             take_vote(&out);
         }
         assert!(!a.feed_is_stale());
         for t in 5..=7 {
-            let out = a.handle(Input::Frame(DetectionFrame { tick: t, ..frozen.clone() }), ms(100 * t));
+            let out = a.handle(
+                Input::Frame(DetectionFrame { capture_us: DetectionFrame::capture_at_tick(t), ..frozen.clone() }),
+                ms(100 * t),
+            );
             let e = take_embedding(&out);
             assert!(e.embedding.is_none() && e.vote.is_none() && e.visibility == 0 && e.worker.is_none(), "{e:?}");
             assert!(decisions(&out)[0].steps.is_empty());
@@ -1555,7 +1733,7 @@ pub(crate) mod tests {
         let set = models();
         let mut b = engine("b", &set);
         b.handle(Input::MemberJoined(id("a")), ms(0));
-        let frozen = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 1, true)), ms(0)));
+        let frozen = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 1, true)), ms(100)));
         let vote_of_a = |tick| VoteMsg {
             visibility: 9,
             ..vote_msg("a", 1, tick, vec![StepVote { class: Station::Manufacturing, confidence: 1.0 }; 21])
@@ -1575,7 +1753,7 @@ pub(crate) mod tests {
         }
         assert_eq!(b.stale_peers(), vec![id("a")]);
         assert_eq!(b.metrics.stale_peer_messages, 3, "three shares left out");
-        let moving = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 8, true)), ms(0)));
+        let moving = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 8, true)), ms(800)));
         b.handle(Input::Embedding(moving), ms(800));
         assert!(b.stale_peers().is_empty(), "a's feed moves again");
     }
@@ -1636,43 +1814,82 @@ pub(crate) mod tests {
         for t in 1..=100u64 {
             let now = ms(100 * t);
             a.handle(Input::Frame(frame("a", t, false)), now);
-            // b and c place the worker 0.3 m apart, d 4 m away; all three abstain
+            // b and c place the worker 0.3 m apart, d 4 m away; all three vote alike
             for (p, x) in [("b", 5.0), ("c", 5.3), ("d", 9.0)] {
-                // the embedding moves every tick: no peer's feed looks frozen
-                let e = share(p, t, Some(x * 0.01 + t as f32 * 1e-3), None, Some(at(x)));
+                let mut e = share(p, t, None, Some(one_step(Station::Assembly)), None);
+                e.vote.as_mut().unwrap().worker = Some(at(x));
                 a.handle(Input::Embedding(e), now);
             }
             a.handle(Input::Poll, now + ms(99));
         }
         let trust = a.trust();
-        // judged on ticks 2..=100, each on the estimates of the tick before (on tick 1
-        // nobody had been heard from yet)
+        // judged on the ballots of ticks 2..=100 (a decided tick 1 alone, before it
+        // had heard anyone)
         assert!((trust[&id("d")] - 0.99f32.powi(99)).abs() < 1e-3, "{trust:?}");
         assert_eq!((trust[&id("b")], trust[&id("c")]), (1.0, 1.0));
-        assert_eq!(a.metrics.decisions, 100, "nobody voted, every tick was still decided");
+        assert_eq!(a.metrics.decisions, 100);
+    }
+
+    /// Robot `a` hears b and c vote `Workstation` at 0.8 every tick and d vote
+    /// `Manufacturing` at confidence 1 claiming the fullest view and visibility: a
+    /// confident liar. Returns a's decisions at t.
+    fn with_a_confident_liar(a: &mut Engine, ticks: std::ops::RangeInclusive<u64>) -> Vec<Option<Station>> {
+        let mut decided = Vec::new();
+        let me = a.cfg.robot.to_string();
+        for t in ticks {
+            let now = ms(100 * t);
+            a.handle(Input::Frame(frame(&me, t, false)), now);
+            for (p, class, confidence) in
+                [("b", Station::Workstation, 0.8), ("c", Station::Workstation, 0.8), ("d", Station::Manufacturing, 1.0)]
+            {
+                let mut e = share(p, t, None, Some(vec![StepVote { class, confidence }; 3]), None);
+                if p == "d" {
+                    let v = e.vote.as_mut().unwrap();
+                    (v.visibility, v.quality) = (10_000, 1.0);
+                }
+                let out = a.handle(Input::Embedding(e), now + ms(1));
+                decided.extend(decisions(&out).iter().map(|d| d.steps.first().map(|s| s.class)));
+            }
+        }
+        decided
     }
 
     #[test]
-    fn our_vote_carries_the_trust_our_record_earned() {
+    fn a_confident_liar_weighs_what_we_learned_of_it_and_stops_counting() {
         let set = models();
         let mut a = engine("a", &set);
-        a.handle(Input::MemberJoined(id("b")), ms(0));
-        let mut trusts = Vec::new();
-        for t in 1..=30u64 {
-            let now = ms(100 * t);
-            let ours = take_vote(&a.handle(Input::Frame(frame("a", t, true)), now));
-            trusts.push(ours.trust);
-            // b always votes another class than ours, as sure as we are
-            let theirs =
-                ours.steps.iter().map(|s| StepVote { class: Station::ALL[(s.class.index() + 1) % NUM_CLASSES], ..*s });
-            a.handle(Input::Embedding(share("b", t, None, Some(theirs.collect()), None)), now + ms(32));
-            a.handle(Input::Poll, now + ms(99));
+        for p in ["b", "c", "d"] {
+            a.handle(Input::MemberJoined(id(p)), ms(0));
         }
-        // Tick 1 a decided alone (b not heard from yet): judged from tick 2 on.
-        assert_eq!(&trusts[..2], &[1.0, 1.0], "trusted until judged");
-        assert!(trusts[1..].windows(2).all(|w| w[1] < w[0]), "{trusts:?}");
-        assert!((trusts[29] - 0.99f32.powi(28)).abs() < 1e-4, "{}", trusts[29]);
-        assert!((a.trust()[&id("a")] - 0.99f32.powi(29)).abs() < 1e-4);
+        let decided = with_a_confident_liar(&mut a, 1..=120);
+        // Trusted at first, d outweighs either honest voter but not both: e(1) =
+        // ln 297 = 5.7 against 2 × ln 12 = 5.0 ... until its trust falls below 0.88.
+        let d = a.trust()[&id("d")];
+        assert!(d < 0.5, "d disagreed with b and c for 12 s: {d}");
+        assert!(a.metrics.votes_set_aside > 0, "d's votes are set aside once its trust falls below 0.5");
+        // From its 7th second on (trust below 0.5), d decides nothing for the team.
+        assert!(decided[70..].iter().all(|c| *c == Some(Station::Workstation)), "{:?}", &decided[70..]);
+        let last = a.last_decision().unwrap();
+        assert_eq!(last.voters, vec![id("b"), id("c")], "d is not counted");
+        assert!((a.trust()[&id("b")] - 1.0).abs() < 0.2, "the honest keep their trust: {:?}", a.trust());
+    }
+
+    #[test]
+    fn robots_that_counted_the_same_ballots_weigh_them_alike() {
+        let set = models();
+        let (mut a, mut e) = (engine("a", &set), engine("e", &set));
+        for x in [&mut a, &mut e] {
+            for p in ["b", "c", "d"] {
+                x.handle(Input::MemberJoined(id(p)), ms(0));
+            }
+        }
+        let (da, de) = (with_a_confident_liar(&mut a, 1..=90), with_a_confident_liar(&mut e, 1..=90));
+        assert_eq!(da, de);
+        let (ta, te) = (a.trust(), e.trust());
+        for p in ["b", "c", "d"] {
+            assert_eq!(ta[&id(p)], te[&id(p)], "{p}");
+        }
+        assert_eq!(a.last_decision().unwrap().digest, e.last_decision().unwrap().digest);
     }
 
     #[test]

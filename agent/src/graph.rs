@@ -233,7 +233,7 @@ mod tests {
     fn frame(objects: &[(f32, f32)]) -> DetectionFrame {
         DetectionFrame {
             robot: RobotId::new("r").unwrap(),
-            tick: 1,
+            capture_us: 1,
             pose: None,
             image_size: [300.0, 400.0], // diagonal 500
             human: Some(HumanDetection {
@@ -325,7 +325,7 @@ mod floor_tests {
         };
         DetectionFrame {
             robot: RobotId::new("r").unwrap(),
-            tick: 1,
+            capture_us: 1,
             pose: Some(pose),
             image_size: [cam.image[0] as f32, cam.image[1] as f32],
             human: Some(HumanDetection {

@@ -24,7 +24,7 @@ pub async fn serve(
     let listener = TcpListener::bind(addr).await.map_err(|e| anyhow::anyhow!("http.listen {addr}: {e}"))?;
     let bound = listener.local_addr()?;
     let app = Router::new()
-        .route("/healthz", get(|| async { "ok\n" }))
+        .route("/healthz", get(healthz))
         .route("/status", get(status_json))
         .route("/metrics", get(metrics))
         .fallback(|| async { (StatusCode::NOT_FOUND, "not found: try /healthz, /status or /metrics\n") })
@@ -38,6 +38,15 @@ pub async fn serve(
         }
     };
     Ok((bound, fut))
+}
+
+/// 200 "ok", or 503 and the reason when frames arrive but no tick gets decided.
+async fn healthz(State(status): State<SharedStatus>) -> impl IntoResponse {
+    let problem = status.lock().ok().and_then(|s| s.health.check(std::time::Instant::now()));
+    match problem {
+        None => (StatusCode::OK, "ok\n".to_owned()),
+        Some(p) => (StatusCode::SERVICE_UNAVAILABLE, format!("unhealthy: {p}\n")),
+    }
 }
 
 async fn status_json(State(status): State<SharedStatus>) -> impl IntoResponse {

@@ -19,9 +19,12 @@
 //!
 //! Modules:
 //! - [`engine`]: one robot's tick state machine, pure (inputs and `now` in, messages out);
+//! - [`clock`]: the fleet's clock: ticks as periods of a synchronised wall clock, and the
+//!   window of ticks a robot takes input for;
 //! - [`graph`], [`temporal`], [`vote`], [`consensus`]: the pure pipeline stages;
 //! - [`stale`]: feeds that repeat themselves (a frozen camera), set aside;
-//! - [`trust`]: each voter's record of agreeing with the others, which weighs its votes;
+//! - [`trust`]: what each robot learned of every voter from the ballots it decided on,
+//!   which weighs their votes;
 //! - [`floor`]: back-projection, the shared worker track and station map, relations;
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
 //! - [`daemon`]: the event loop, its connection to the fleet (session, liveliness,
@@ -32,6 +35,7 @@
 //! - [`http`], [`status`], [`metrics`]: `/healthz`, `/status`, `/metrics`.
 
 pub mod cli;
+pub mod clock;
 pub mod config;
 pub mod consensus;
 pub mod daemon;

@@ -4,6 +4,7 @@
 //! path); the HTTP side reads a snapshot refreshed once per decision and registers it
 //! in a registry of its own per scrape.
 
+use crate::clock::OffClock;
 use prometheus_client::encoding::{EncodeMetric, MetricEncoder, NoLabelSet};
 use prometheus_client::metrics::counter::ConstCounter;
 use prometheus_client::metrics::gauge::ConstGauge;
@@ -162,10 +163,21 @@ pub struct Metrics {
     pub repeated_frames: u64,
     /// Messages of peers whose feed repeats itself, left out.
     pub stale_peer_messages: u64,
+    /// Frames and peer messages refused for a tick outside our window, by side.
+    pub off_clock: BTreeMap<OffClock, u64>,
+    /// Relayed votes refused: their origin is no live member, or they are of another
+    /// instance than the one it runs.
+    pub foreign_votes: u64,
+    /// Votes not counted: their voter's trust is below the counting threshold.
+    pub votes_set_aside: u64,
     pub stages: BTreeMap<Stage, Histogram>,
 }
 
 impl Metrics {
+    pub fn count_off_clock(&mut self, why: OffClock) {
+        *self.off_clock.entry(why).or_default() += 1;
+    }
+
     pub fn observe(&mut self, stage: Stage, d: Duration) {
         self.stages.entry(stage).or_default().observe(d);
     }
@@ -182,7 +194,7 @@ impl Metrics {
     /// Registers every counter and histogram, as they stand, in `registry` (the
     /// scrape's own: see [`exposition`]); `members` is the live member count.
     pub fn register(&self, registry: &mut Registry, members: usize) {
-        let counters: [(&str, &str, u64); 19] = [
+        let counters: [(&str, &str, u64); 21] = [
             ("spwi_frames", "detection frames processed", self.frames),
             ("spwi_frames_with_worker", "frames in which the worker was seen", self.frames_with_worker),
             ("spwi_decisions", "team decisions published", self.decisions),
@@ -230,10 +242,26 @@ impl Metrics {
                 "messages of peers whose feed repeats itself, left out",
                 self.stale_peer_messages,
             ),
+            (
+                "spwi_foreign_votes",
+                "relayed votes refused: origin not live, or another instance than its live one",
+                self.foreign_votes,
+            ),
+            (
+                "spwi_votes_set_aside",
+                "votes not counted: their voter's trust is below the threshold",
+                self.votes_set_aside,
+            ),
         ];
         for (name, help, v) in counters {
             registry.register(name, help, ConstCounter::new(v));
         }
+        let off = self.off_clock.iter().map(|(r, &n)| (r.label().to_owned(), ConstCounter::new(n)));
+        registry.register(
+            "spwi_off_clock",
+            "frames and peer messages refused: their tick lies outside our clock's window",
+            ByLabel::new("reason", MetricType::Counter, off),
+        );
         registry.register("spwi_agreement", "share of peer decisions equal to ours", ConstGauge::new(self.agreement()));
         registry.register("spwi_members", "live members counted, this robot included", ConstGauge::new(members as i64));
         let stages = self.stages.iter().map(|(s, h)| (s.name().to_owned(), h.clone()));

@@ -1,12 +1,14 @@
 //! What `/status` reports: a snapshot the tick loop refreshes after each decision and
 //! membership change, so HTTP readers never touch the loop's state.
 
+use crate::clock::PeerClock;
 use crate::engine::Engine;
 use crate::metrics::{Metrics, TransportCounters};
 use serde::Serialize;
 use spwi_proto::{DecisionMsg, RobotId, Station};
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 /// Decisions kept in `/status` (10 s at 10 Hz): enough to compare robots' decisions
 /// tick by tick from outside, e.g. in the container end-to-end test.
@@ -53,6 +55,67 @@ pub struct Status {
     pub metrics: Metrics,
     /// The daemon's: messages refused before the engine, outgoing ones dropped.
     pub transport: TransportCounters,
+    /// How each live peer's ticks sit against our clock ([`crate::clock::PeerClock`]):
+    /// a peer whose messages keep being refused shows here with its estimated offset.
+    pub clocks: BTreeMap<RobotId, PeerClock>,
+    /// Whether frames come in and ticks get decided (`/healthz`).
+    pub health: Health,
+}
+
+/// Frames come in but no tick gets decided: the robot is of no use to its team, and an
+/// orchestrator should know (`/healthz` answers 503).
+#[derive(Debug, Clone, Serialize)]
+pub struct Health {
+    /// Why the robot is unhealthy, as of the last refresh; `None` when it is not.
+    pub problem: Option<String>,
+    #[serde(skip)]
+    started: Instant,
+    #[serde(skip)]
+    last_frame: Option<Instant>,
+    #[serde(skip)]
+    last_decision: Option<Instant>,
+    #[serde(skip)]
+    after: Duration,
+}
+
+impl Health {
+    /// Unhealthy once frames come in without a decision for `after`.
+    pub fn new(after: Duration) -> Health {
+        Health { problem: None, started: Instant::now(), last_frame: None, last_decision: None, after }
+    }
+
+    pub fn frame(&mut self, at: Instant) {
+        self.last_frame = Some(at);
+    }
+
+    pub fn decision(&mut self, at: Instant) {
+        self.last_decision = Some(at);
+    }
+
+    /// What is wrong at `now`, if anything: frames arrived within `after`, yet no tick
+    /// was decided for `after` (or ever, once the daemon has run that long). A robot
+    /// without frames is not unhealthy: it may simply have no camera feed yet.
+    pub fn check(&self, now: Instant) -> Option<String> {
+        let recent = |t: Option<Instant>| t.is_some_and(|t| now.saturating_duration_since(t) <= self.after);
+        if !recent(self.last_frame)
+            || recent(self.last_decision)
+            || now.saturating_duration_since(self.started) < self.after
+        {
+            return None;
+        }
+        Some(match self.last_decision {
+            Some(t) => format!(
+                "frames arrive but no tick was decided for {:.1} s (limit http.unhealthy_after_ms = {})",
+                now.saturating_duration_since(t).as_secs_f64(),
+                self.after.as_millis()
+            ),
+            None => format!(
+                "frames arrive but no tick was ever decided in {:.1} s (limit http.unhealthy_after_ms = {})",
+                now.saturating_duration_since(self.started).as_secs_f64(),
+                self.after.as_millis()
+            ),
+        })
+    }
 }
 
 /// Shared between the tick loop (writer) and the HTTP server (readers).
@@ -72,6 +135,7 @@ impl Status {
         self.trust = engine.trust();
         self.metrics = engine.metrics().clone();
         self.transport = transport.clone();
+        self.clocks = engine.peer_clocks().clone();
     }
 
     /// Appends new decisions, forgetting the oldest beyond [`RECENT_DECISIONS`].
@@ -99,6 +163,18 @@ impl Status {
             "spwi_peer_feed_stale",
             "1 for each peer whose feed repeats itself (left out)",
             ByLabel::new("peer", MetricType::Gauge, stale),
+        );
+        let offsets =
+            self.clocks.iter().filter_map(|(p, c)| Some((p.to_string(), ConstGauge::new(f64::from(c.offset_ms?)))));
+        r.register(
+            "spwi_peer_clock_offset_ms",
+            "start of the tick each live peer names less when we hear it (ms, averaged; the link's delay included)",
+            ByLabel::new("peer", MetricType::Gauge, offsets),
+        );
+        r.register(
+            "spwi_healthy",
+            "1 unless frames arrive and no tick was decided for http.unhealthy_after_ms",
+            ConstGauge::new(i64::from(self.health.problem.is_none())),
         );
         let trust = self.trust.iter().map(|(p, &t)| (p.to_string(), ConstGauge::new(f64::from(t))));
         r.register(

@@ -1,10 +1,15 @@
 //! Who has been right lately: each robot's trust, learned from what it shared.
 //!
-//! Two records per robot, each a moving average over about `window` judgements:
-//! - **votes**: after each decision, every voter that was not alone is judged against
-//!   the decision the *other* voters reach without it (same rule, same ballots less
-//!   its own): the share of its steps that agree;
-//! - **track**: each tick at least three robots place the worker on the floor, each
+//! Two records per robot, each a moving average over about `window` judgements, both
+//! learned from the ballots of each decided tick and nothing else:
+//! - **votes**: every voter is judged, step by step, against the *other* voters of
+//!   the tick: where most of their trust (more than half) names one class, its vote
+//!   agrees or not; where their trust is split, the step tells nothing and is not
+//!   judged. Trust, not confidence, weighs the others here: a voter sure of itself
+//!   cannot make the honest look wrong — two honest voters and one confident liar
+//!   judge the liar wrong (both others name another class) and neither honest voter
+//!   (its others are split), so only the liar loses trust;
+//! - **track**: when at least three ballots place the worker on the floor, each
 //!   estimate is judged against the others (`floor::agrees_with_most`): 1 when it
 //!   puts the worker where most of them do, else 0. A camera replaying old frames
 //!   votes much like its peers — they all read the same team track — but places the
@@ -15,13 +20,21 @@
 //! once its camera recovers. A robot starts trusted, and a record outlives a robot's
 //! leaving: one that comes back is still known.
 //!
-//! A robot puts its own trust into its vote ([`spwi_proto::VoteMsg::trust`]): every
-//! robot then weighs a ballot alike, which the team's agreement needs. The trust this
-//! robot learns of its peers decides whose embeddings and worker estimates it fuses;
-//! `/status` shows both.
+//! What a ballot weighs is the trust its *receiver* learned of the voter
+//! ([`TrustBook::weight`]), never anything the voter says of itself. The team's
+//! agreement needs every robot to weigh a ballot alike: since trust is learned from the
+//! ballots decided on alone, robots that counted the same ballots hold the same trust,
+//! and the weight is rounded to [`WEIGHT_STEPS`] levels so that a rare tick counted
+//! differently (a vote lost on a link) seldom moves it. Voters trusted below
+//! `count_above` are not counted while a trusted voter is ([`TrustBook::counts`]): a
+//! confident liar stops deciding once the others have seen it disagree for a few
+//! seconds. The same trust decides whose embeddings and worker estimates a robot fuses;
+//! `/status` shows it.
 
-use crate::consensus::{self, Ballot, Rule};
-use spwi_proto::RobotId;
+use crate::consensus::Ballot;
+use crate::floor::agrees_with_most;
+use crate::vote::argmax;
+use spwi_proto::{RobotId, WorkerEstimate, NUM_CLASSES};
 use std::collections::BTreeMap;
 
 /// How trust is learned (from `[tick]`).
@@ -33,13 +46,19 @@ pub struct TrustConfig {
     pub floor: f32,
     /// Peers trusted less than this leave our embedding and worker-track fusion.
     pub fuse_above: f32,
+    /// Voters trusted less than this are not counted while a voter trusted more is.
+    #[serde(default)]
+    pub count_above: f32,
 }
 
 impl Default for TrustConfig {
     fn default() -> Self {
-        TrustConfig { window: 100, floor: 0.1, fuse_above: 0.5 }
+        TrustConfig { window: 100, floor: 0.1, fuse_above: 0.5, count_above: 0.5 }
     }
 }
+
+/// Levels a ballot's weight is rounded to (in (0, 1]).
+pub const WEIGHT_STEPS: f32 = 16.0;
 
 /// Moving averages of one robot's agreement with the others.
 #[derive(Debug, Clone, Copy)]
@@ -76,6 +95,17 @@ impl TrustBook {
         self.of(robot) >= self.cfg.fuse_above
     }
 
+    /// What a ballot of `robot` weighs: its trust rounded to one of [`WEIGHT_STEPS`]
+    /// levels (never zero).
+    pub fn weight(&self, robot: &RobotId) -> f32 {
+        ((self.of(robot) * WEIGHT_STEPS).round() / WEIGHT_STEPS).max(1.0 / WEIGHT_STEPS)
+    }
+
+    /// A voter whose ballot is counted while a trusted voter's is.
+    pub fn counts(&self, robot: &RobotId) -> bool {
+        self.of(robot) >= self.cfg.count_above
+    }
+
     /// Every robot judged so far and its trust.
     pub fn all(&self) -> BTreeMap<RobotId, f32> {
         self.records.keys().map(|r| (r.clone(), self.of(r))).collect()
@@ -101,14 +131,23 @@ impl TrustBook {
         r.track += rate * (f32::from(u8::from(agrees)) - r.track);
     }
 
-    /// Judges each voter of a decided tick against the others' decision under `rule`.
-    /// `ballots` sorted by robot, as [`consensus::decide`] leaves them.
-    pub fn learn(&mut self, ballots: &[Ballot<'_>], rule: Rule) {
-        if ballots.len() < 2 {
-            return;
+    /// Judges the worker estimates of a decided tick's ballots against each other, when
+    /// at least three place the worker.
+    pub fn learn_tracks(&mut self, estimates: &[(&RobotId, &WorkerEstimate)]) {
+        let places: Vec<&WorkerEstimate> = estimates.iter().map(|(_, e)| *e).collect();
+        if let Some(agrees) = agrees_with_most(&places) {
+            for ((robot, _), ok) in estimates.iter().zip(agrees) {
+                self.learn_track(robot, ok);
+            }
         }
+    }
+
+    /// Judges every voter of a decided tick against the others (counted or set aside
+    /// alike, each weighing its `trust`). `ballots` sorted by robot, as
+    /// [`crate::consensus::decide`] leaves them.
+    pub fn learn(&mut self, ballots: &[Ballot<'_>]) {
         let rate = self.rate();
-        for (b, (agreed, judged)) in ballots.iter().zip(consensus::agreement_with_the_others(ballots, rule)) {
+        for (b, (agreed, judged)) in ballots.iter().zip(judge(ballots)) {
             if judged == 0 {
                 continue;
             }
@@ -117,6 +156,33 @@ impl TrustBook {
             r.votes += rate * (x - r.votes);
         }
     }
+}
+
+/// Per ballot: (its steps whose class most of the others' trust names, its steps on
+/// which most of the others' trust names one class). Sums run in ballot order, so the
+/// result is the same on every robot.
+pub fn judge(ballots: &[Ballot<'_>]) -> Vec<(usize, usize)> {
+    ballots
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            let mut tally = (0, 0);
+            for (h, s) in b.steps.iter().enumerate() {
+                let mut score = [0.0f32; NUM_CLASSES];
+                let others = ballots.iter().enumerate().filter(|&(j, o)| j != i && h < o.steps.len());
+                for (_, o) in others {
+                    score[o.steps[h].class.index()] += o.trust.max(0.0);
+                }
+                let total: f32 = score.iter().sum();
+                let k = argmax(&score);
+                if total > 0.0 && score[k] > 0.5 * total {
+                    tally.1 += 1;
+                    tally.0 += usize::from(s.class.index() == k);
+                }
+            }
+            tally
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -136,14 +202,14 @@ mod tests {
         let ballots: Vec<Ballot<'_>> = ids
             .iter()
             .zip(&steps)
-            .map(|(r, s)| Ballot { robot: r, visibility: 1, trust: book.of(r), quality: 1.0, steps: s })
+            .map(|(r, s)| Ballot { robot: r, visibility: 1, trust: book.weight(r), quality: 1.0, steps: s })
             .collect();
-        book.learn(&ballots, Rule::Trust);
+        book.learn(&ballots);
     }
 
     #[test]
     fn a_voter_that_keeps_disagreeing_loses_trust_down_to_the_floor_and_earns_it_back() {
-        let cfg = TrustConfig { window: 10, floor: 0.1, fuse_above: 0.5 };
+        let cfg = TrustConfig { window: 10, floor: 0.1, fuse_above: 0.5, count_above: 0.5 };
         let mut book = TrustBook::new(cfg);
         let ids = [id("a"), id("b"), id("c")];
         assert_eq!(book.of(&ids[2]), 1.0, "trusted until judged");
@@ -182,14 +248,39 @@ mod tests {
             Ballot { robot: &ids[0], visibility: 1, trust: 1.0, quality: 1.0, steps: &sa },
             Ballot { robot: &ids[1], visibility: 1, trust: 1.0, quality: 1.0, steps: &sb },
         ];
-        book.learn(&ballots, Rule::Trust);
+        book.learn(&ballots);
         assert!((book.of(&ids[0]) - 1.0 / 3.0).abs() < 1e-6);
         assert!((book.of(&ids[1]) - 1.0 / 3.0).abs() < 1e-6);
     }
 
     #[test]
+    fn a_sure_liar_cannot_make_the_honest_look_wrong() {
+        // b and c vote workstation at .6, d manufacturing at 1.0: a confidence-weighted
+        // judge would find b and c each outvoted by d (and so all three losing trust
+        // alike); the others' trust finds only d wrong.
+        let mut book = TrustBook::new(TrustConfig::default());
+        let ids = [id("b"), id("c"), id("d")];
+        let (honest, sure) = (
+            vec![StepVote { class: Workstation, confidence: 0.6 }; 3],
+            vec![StepVote { class: Manufacturing, confidence: 1.0 }; 3],
+        );
+        for _ in 0..100 {
+            let ballots: Vec<Ballot<'_>> = ids
+                .iter()
+                .zip([&honest, &honest, &sure])
+                .map(|(r, s)| Ballot { robot: r, visibility: 1, trust: book.weight(r), quality: 1.0, steps: s })
+                .collect();
+            book.learn(&ballots);
+        }
+        assert_eq!((book.of(&ids[0]), book.of(&ids[1])), (1.0, 1.0));
+        assert!((book.of(&ids[2]) - 0.99f32.powi(100)).abs() < 1e-4, "{}", book.of(&ids[2]));
+        assert!(!book.counts(&ids[2]) && book.counts(&ids[0]));
+        assert_eq!(book.weight(&ids[2]), 0.375, "0.366 rounded to sixteenths");
+    }
+
+    #[test]
     fn trust_is_the_product_of_the_vote_and_track_records() {
-        let mut book = TrustBook::new(TrustConfig { window: 2, floor: 0.1, fuse_above: 0.5 });
+        let mut book = TrustBook::new(TrustConfig { window: 2, floor: 0.1, fuse_above: 0.5, count_above: 0.5 });
         let ids = [id("a"), id("b"), id("c")];
         book.learn_track(&ids[0], false); // 1 → 0.5
         assert_eq!(book.of(&ids[0]), 0.5);

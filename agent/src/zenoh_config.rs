@@ -25,8 +25,15 @@
 //! decision on 87–157 of 200 ticks with the agents' settings, and on none with these
 //! (docs/BENCHMARKS.md, "Peer mesh or routers").
 //!
+//! Every link refuses a message larger than [`RX_MAX_MESSAGE_BYTES`], twice our largest
+//! (a full detection frame is about 135 kB; the codec refuses anything above
+//! `spwi_proto::MAX_MESSAGE_BYTES`). Zenoh's own limit is 1 GiB, and it reassembles a
+//! fragmented message before anyone can look at it: a peer sending one 256 MB message
+//! took a robot from 37 to 524 MB of memory before the codec refused it.
+//!
 //! A file given by the user is taken as is; set `transport/link/tx/lease` and the
-//! queue size in it.
+//! queue size in it. Only the receive limit is lowered there too when the file leaves
+//! it at Zenoh's default.
 
 use anyhow::{anyhow, bail, Result};
 use std::path::Path;
@@ -43,6 +50,12 @@ pub const ROUTER_DATA_QUEUE_BATCHES: u64 = 16;
 /// How long a router's droppable message waits for a free batch (µs; Zenoh's: 1000).
 /// Well within the tick's 60 ms decision deadline.
 pub const ROUTER_WAIT_BEFORE_DROP_US: u64 = 10_000;
+
+/// The largest message a link reassembles (bytes): twice the largest message spwi
+/// decodes.
+pub const RX_MAX_MESSAGE_BYTES: usize = 2 * spwi_proto::MAX_MESSAGE_BYTES;
+/// Zenoh's own default for it.
+const ZENOH_RX_MAX_MESSAGE_BYTES: usize = 1 << 30;
 
 /// Builds the Zenoh config from an optional json5 file and `KEY:VALUE` overrides
 /// (VALUE is json5, e.g. `mode:"peer"` or `listen/endpoints:["tcp/0.0.0.0:7447"]`).
@@ -68,6 +81,15 @@ pub fn build_router(file: Option<&Path>, overrides: &[String]) -> Result<zenoh::
 }
 
 fn from_file_or_defaults(file: Option<&Path>) -> Result<zenoh::Config> {
+    let mut c = file_or_defaults(file)?;
+    let rx_key = "transport/link/rx/max_message_size";
+    if c.get_json(rx_key).ok().and_then(|v| v.parse::<usize>().ok()) == Some(ZENOH_RX_MAX_MESSAGE_BYTES) {
+        set(&mut c, rx_key, &RX_MAX_MESSAGE_BYTES.to_string())?;
+    }
+    Ok(c)
+}
+
+fn file_or_defaults(file: Option<&Path>) -> Result<zenoh::Config> {
     Ok(match file {
         Some(p) => zenoh::Config::from_file(p).map_err(|e| anyhow!("zenoh config {}: {e}", p.display()))?,
         None => {
@@ -130,6 +152,8 @@ mod tests {
         let c = build(None, &["mode:\"client\"".to_owned()]).unwrap();
         let lease = c.get_json("transport/link/tx/lease").unwrap();
         assert_eq!(lease, "1000");
+        let rx = c.get_json("transport/link/rx/max_message_size").unwrap();
+        assert_eq!(rx, RX_MAX_MESSAGE_BYTES.to_string(), "a link refuses what no spwi message needs");
         assert_eq!(c.get_json("transport/link/tx/queue/size/data").unwrap(), "8");
         assert_eq!(c.get_json("mode").unwrap(), "\"client\"");
     }

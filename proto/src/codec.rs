@@ -16,8 +16,10 @@ use serde::Serialize;
 /// the ballot digest in the decision; 4: the voter's standing and view quality in the
 /// vote; 5: the voter's signature; 6: the worker's facing in the embedding message;
 /// 7: the robot's latest verdict in the embedding message; 8: the vote in the embedding
-/// message, which robots read it from).
-pub const PROTOCOL_VERSION: u16 = 8;
+/// message, which robots read it from; 9: the frame's capture time on the fleet's clock
+/// instead of a tick counter; in the vote no self-reported trust, and the voter's
+/// worker estimate).
+pub const PROTOCOL_VERSION: u16 = 9;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -133,8 +135,8 @@ mod tests {
             tick: 42,
             steps: vec![StepVote { class: Station::Assembly, confidence: 0.75 }; 21],
             visibility: 5,
-            trust: 0.9,
             quality: 0.5,
+            worker: None,
             signature: Vec::new(),
         }
     }
@@ -267,9 +269,9 @@ mod tests {
                 .to_string();
             assert!(e.contains("field `vote`") && e.contains("in r1's message of tick 9"), "{e}");
         }
-        let bad = VoteMsg { trust: 2.0, ..ours };
+        let bad = VoteMsg { quality: 2.0, ..ours };
         let e = decode::<EmbeddingMsg>(&encode(&EmbeddingMsg { vote: Some(bad), ..embedding() })).unwrap_err();
-        assert!(e.to_string().contains("field `trust`"), "{e}");
+        assert!(e.to_string().contains("field `quality`"), "{e}");
     }
 
     #[test]
@@ -293,8 +295,8 @@ mod tests {
         let mut v = vote();
         v.steps[3].confidence = f32::NAN;
         assert!(matches!(decode::<VoteMsg>(&encode(&v)), Err(DecodeError::Invalid { .. })));
-        let e = decode::<VoteMsg>(&encode(&VoteMsg { trust: 1.5, ..vote() })).unwrap_err().to_string();
-        assert!(e.contains("trust") && e.contains("1.5 not in [0, 1]"), "{e}");
+        let e = decode::<VoteMsg>(&encode(&VoteMsg { quality: 1.5, ..vote() })).unwrap_err().to_string();
+        assert!(e.contains("quality") && e.contains("1.5 not in [0, 1]"), "{e}");
         let e = decode::<VoteMsg>(&encode(&VoteMsg { quality: f32::NAN, ..vote() })).unwrap_err().to_string();
         assert!(e.contains("quality"), "{e}");
         let e = decode::<VoteMsg>(&encode(&VoteMsg { signature: vec![1; 10], ..vote() })).unwrap_err().to_string();
@@ -319,8 +321,8 @@ mod tests {
         tick: u64,
         steps: Vec<(u8, f32)>,
         visibility: u32,
-        trust: f32,
         quality: f32,
+        worker: Option<WorkerEstimate>,
         signature: Vec<u8>,
     }
 
@@ -331,8 +333,8 @@ mod tests {
             tick: v.tick,
             steps: v.steps.iter().map(|s| (class(s.class), s.confidence)).collect(),
             visibility: v.visibility,
-            trust: v.trust,
             quality: v.quality,
+            worker: v.worker,
             signature: v.signature.clone(),
         };
         bincode::serde::encode_to_vec((PROTOCOL_VERSION, old), CONFIG).unwrap()

@@ -15,6 +15,19 @@ pub const KEYPOINT_VALUES: usize = 34;
 pub const EMBEDDING_DIM: usize = 128;
 /// The period of a tick: every frame, vote and decision belongs to one (10 Hz).
 pub const TICK_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
+/// [`TICK_PERIOD`] in microseconds: tick `t` is the fleet clock's period
+/// `[t · TICK_US, (t + 1) · TICK_US)` µs after the Unix epoch.
+pub const TICK_US: u64 = 100_000;
+
+/// The tick a moment of the fleet's clock (time since the Unix epoch) falls in.
+pub fn tick_at(t: std::time::Duration) -> u64 {
+    (t.as_micros() / u128::from(TICK_US)) as u64
+}
+
+/// When tick `t` starts on the fleet's clock (time since the Unix epoch).
+pub fn tick_start(t: u64) -> std::time::Duration {
+    std::time::Duration::from_micros(t.saturating_mul(TICK_US))
+}
 /// Most object detections one frame may carry.
 pub const MAX_OBJECTS: usize = 64;
 /// Most steps (t plus forecast) one vote or decision may carry.
@@ -154,11 +167,14 @@ pub struct FloorPose {
     pub heading: f32,
 }
 
-/// One camera frame's worth of detections of one robot, for one tick.
+/// One camera frame's worth of detections of one robot. Its tick is the period of the
+/// fleet's clock it was captured in ([`DetectionFrame::tick`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DetectionFrame {
     pub robot: RobotId,
-    pub tick: u64,
+    /// When the camera took the frame: microseconds since the Unix epoch on the robot's
+    /// synchronised clock (chrony or PTP), stamped by the frame's source.
+    pub capture_us: u64,
     /// The camera's pose when the frame was taken; `None` when the robot is not
     /// localised (it then shares no floor-frame estimates).
     pub pose: Option<FloorPose>,
@@ -171,6 +187,16 @@ pub struct DetectionFrame {
 }
 
 impl DetectionFrame {
+    /// The tick the frame was captured in: `floor(capture_us / TICK_US)`.
+    pub fn tick(&self) -> u64 {
+        self.capture_us / TICK_US
+    }
+
+    /// The capture time of tick `t`'s start, for sources that capture on the tick.
+    pub fn capture_at_tick(t: u64) -> u64 {
+        t.saturating_mul(TICK_US)
+    }
+
     /// Visibility count N_detected: the worker (if seen) plus every object detected.
     pub fn visibility(&self) -> u32 {
         self.objects.len() as u32 + u32::from(self.human.is_some())
@@ -377,13 +403,15 @@ pub struct VoteMsg {
     pub tick: u64,
     pub steps: Vec<StepVote>,
     pub visibility: u32,
-    /// How often this robot's votes agreed with the decision of the others lately, as
-    /// the robot itself measured it from the ballots it decided on (in [0, 1]). It
-    /// travels with the vote so that every robot weighs the ballot alike.
-    pub trust: f32,
-    /// How well the robot sees the worker this tick (in [0, 1]): how large and how
-    /// complete the worker is in its view.
+    /// How well the robot says it sees the worker this tick (in [0, 1]): how large and
+    /// how complete the worker is in its view. It can only lower the vote's weight:
+    /// what a vote weighs is the trust its receivers have observed of its voter.
     pub quality: f32,
+    /// Where the voter's own camera puts the worker this tick (`None`: it does not see
+    /// the worker, or is not localised). Every robot that counts the ballot judges it
+    /// against the other ballots' estimates, so that all of them learn alike whose
+    /// camera places the worker where nobody else does.
+    pub worker: Option<WorkerEstimate>,
     /// In a secured fleet, the voter's Ed25519 signature over [`VoteMsg::signed_bytes`]
     /// (64 bytes), so that a peer relaying the vote cannot change it; empty in an open
     /// fleet. Not part of what is decided, nor of the decision digest.
@@ -391,9 +419,15 @@ pub struct VoteMsg {
 }
 
 impl VoteMsg {
-    /// What the signature covers: the vote encoded with an empty signature.
-    pub fn signed_bytes(&self) -> Vec<u8> {
-        crate::encode(&VoteMsg { signature: Vec::new(), ..self.clone() })
+    /// What the signature covers: the fleet's id, then the vote encoded with an empty
+    /// signature (robot, instance, tick and content). The fleet binds a vote to its
+    /// fleet, the instance to the voter's run, the tick to a period of the fleet's
+    /// clock: a vote recorded in one fleet or run counts in no other.
+    pub fn signed_bytes(&self, fleet: &crate::FleetId) -> Vec<u8> {
+        let mut bytes = fleet.as_str().as_bytes().to_vec();
+        bytes.push(0xff); // ids hold no 0xff byte: the fleet ends here
+        bytes.extend(crate::encode(&VoteMsg { signature: Vec::new(), ..self.clone() }));
+        bytes
     }
 }
 
@@ -407,10 +441,11 @@ impl Validate for VoteMsg {
                 return Err(invalid("steps.confidence", format!("{} not in [0, 1]", s.confidence)));
             }
         }
-        for (name, x) in [("trust", self.trust), ("quality", self.quality)] {
-            if !(x.is_finite() && (0.0..=1.0).contains(&x)) {
-                return Err(invalid(name, format!("{x} not in [0, 1]")));
-            }
+        if !(self.quality.is_finite() && (0.0..=1.0).contains(&self.quality)) {
+            return Err(invalid("quality", format!("{} not in [0, 1]", self.quality)));
+        }
+        if let Some(w) = &self.worker {
+            w.validate()?;
         }
         if !matches!(self.signature.len(), 0 | 64) {
             return Err(invalid("signature", format!("{} bytes, expected 0 or 64", self.signature.len())));

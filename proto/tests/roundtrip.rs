@@ -36,9 +36,9 @@ fn frame() -> impl Strategy<Value = DetectionFrame> {
         prop::collection::vec(finite(), FEATURE_DIM),
         prop::option::of((finite(), finite(), finite())),
     )
-        .prop_map(|(robot, tick, (w, h), human, objects, scene_feature, pose)| DetectionFrame {
+        .prop_map(|(robot, capture_us, (w, h), human, objects, scene_feature, pose)| DetectionFrame {
             robot,
-            tick,
+            capture_us,
             pose: pose.map(|(x, y, heading)| FloorPose { position: [x, y], heading }),
             image_size: [w, h],
             human,
@@ -77,15 +77,15 @@ proptest! {
         let worker = worker.map(|(x, y, vx, vy, pp, pv, vv)| WorkerEstimate { position: [x, y], velocity: [vx, vy], covariance: [pp, pv * pp.sqrt(), vv] });
         let landmarks = landmarks.into_iter().map(|(station, x, y, sigma)| Landmark { station, position: [x, y], sigma }).collect();
         let verdict = verdict.map(|(tick, class, voters, digest)| Verdict { tick, class, voters: voters.into_iter().collect(), digest });
-        let vote = vote.map(|(steps, trust)| VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, trust, quality: 0.5, signature: vec![7; 64] });
+        let vote = vote.map(|(steps, quality)| VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, quality, worker, signature: vec![7; 64] });
         let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, vote, worker, facing, landmarks, verdict };
         prop_assert_eq!(decode::<EmbeddingMsg>(&encode(&m)).unwrap(), m);
     }
 
     #[test]
     fn votes_round_trip(robot in robot(), instance in any::<u64>(), tick in any::<u64>(), steps in steps(), visibility in any::<u32>(),
-                        trust in 0.0f32..=1.0, quality in 0.0f32..=1.0) {
-        let m = VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, trust, quality, signature: vec![9; 64] };
+                        quality in 0.0f32..=1.0) {
+        let m = VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, quality, worker: None, signature: vec![9; 64] };
         prop_assert_eq!(decode_from::<VoteMsg>(&encode(&m), &robot).unwrap(), m);
     }
 
@@ -100,7 +100,7 @@ proptest! {
     #[test]
     fn relayed_ballots_round_trip(robot in robot(), tick in any::<u64>(), votes in prop::collection::vec((steps(), any::<u32>()), 0..6)) {
         let votes = votes.into_iter().enumerate().map(|(i, (steps, visibility))| VoteMsg {
-            robot: RobotId::new(format!("o{i}")).unwrap(), instance: i as u64, tick, steps, visibility, trust: 1.0, quality: 0.5, signature: Vec::new(),
+            robot: RobotId::new(format!("o{i}")).unwrap(), instance: i as u64, tick, steps, visibility, quality: 0.5, worker: None, signature: Vec::new(),
         }).collect();
         let m = BallotsMsg { robot: robot.clone(), instance: 2, tick, votes };
         prop_assert_eq!(decode_from::<BallotsMsg>(&encode(&m), &robot).unwrap(), m);

@@ -4,8 +4,8 @@
 //! last live robot publishing its decision; agreement; messages and bytes the agents
 //! publish per tick; each agent's CPU and resident memory from /proc.
 //!
-//! Paced mode ticks at 10 Hz, as deployed. `--free` publishes the next tick as soon as
-//! every robot decided the last (or after 200 ms), giving the fleet's maximum rate.
+//! The world ticks at 10 Hz on the fleet's clock, as deployed: a fleet decides one tick
+//! per period of its clock, so there is no faster rate to measure.
 //! `--secured` runs the fleet as deployed outside development: a fresh fleet directory
 //! (CA, the world, one identity per agent), mutual TLS and access control on every link.
 //! `--routers N` makes the robots Zenoh clients of N routers instead of a peer mesh;
@@ -25,7 +25,6 @@ use std::time::{Duration, Instant};
 pub struct BenchOptions {
     pub fleet: FleetOptions,
     pub duration: Duration,
-    pub free_running: bool,
     pub scenario: Scenario,
     /// Kill router 0 this long after the measurement starts.
     pub router_down_at: Option<Duration>,
@@ -53,7 +52,6 @@ impl LatencyMs {
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
     pub robots: usize,
-    pub free_running: bool,
     /// Mutual TLS and access control on every link (`--secured`).
     pub secured: bool,
     /// 0: a peer mesh; N: the robots are clients of N routers (`--routers`).
@@ -88,7 +86,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let (mut cpu0, mut routers_cpu0, mut measure_from) = (Vec::new(), 0.0, None);
     let mut router_down_tick = None;
     let started = Instant::now();
-    let mut next = Instant::now();
+    let mut next = crate::loopback::next_tick_instant();
     loop {
         let now = Instant::now();
         if measure_from.is_none() && now - started >= warmup {
@@ -96,7 +94,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
             routers_cpu0 = fleet.routers_cpu_s();
             let mut traffic = fleet.traffic.lock().expect("traffic");
             (traffic.messages, traffic.bytes) = (0, 0);
-            measure_from = Some((now, world.tick + 1));
+            measure_from = Some((now, world.clock_tick() + 1));
         }
         if measure_from.is_some_and(|(t, _)| now - t >= o.duration) {
             break;
@@ -104,21 +102,14 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         if let (Some(at), Some((since, _)), None) = (o.router_down_at, measure_from, router_down_tick) {
             if now - since >= at {
                 fleet.kill_router(0)?;
-                router_down_tick = Some(world.tick + 1);
+                router_down_tick = Some(world.clock_tick() + 1);
             }
         }
         world.step();
-        let t = world.tick;
-        published.insert(t, fleet.publish(&mut world).await?);
-        if o.free_running {
-            let deadline = published[&t] + Duration::from_millis(200);
-            while Instant::now() < deadline && fleet.decisions.lock().get(&t).is_none_or(|d| d.len() < robots) {
-                tokio::time::sleep(Duration::from_micros(200)).await;
-            }
-        } else {
-            next += spwi_proto::TICK_PERIOD;
-            tokio::time::sleep_until(tokio::time::Instant::from_std(next)).await;
-        }
+        let sent = fleet.publish(&mut world).await?;
+        published.insert(world.clock_tick(), sent);
+        next += spwi_proto::TICK_PERIOD;
+        tokio::time::sleep_until(tokio::time::Instant::from_std(next)).await;
     }
     let (measured_since, first_tick) = measure_from.expect("measured");
     let elapsed = measured_since.elapsed().as_secs_f64();
@@ -132,7 +123,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     };
     drop(fleet);
 
-    let last_tick = world.tick;
+    let last_tick = world.clock_tick();
     let ticks = last_tick + 1 - first_tick;
     let (mut latencies, mut agreed, mut complete, mut incomplete) = (Vec::new(), 0u64, 0u64, 0u64);
     let mut last_incomplete = None;
@@ -152,7 +143,6 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let n = robots as f64;
     Ok(BenchReport {
         robots,
-        free_running: o.free_running,
         secured: o.fleet.secured,
         routers: o.fleet.routers,
         ticks,
@@ -177,7 +167,7 @@ pub fn print(r: &BenchReport) {
     println!(
         "{} robots{}{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
         r.robots,
-        if r.free_running { " (free-running)" } else { " at 10 Hz" },
+        " at 10 Hz",
         if r.secured { ", secured" } else { "" },
         match r.routers {
             0 => String::new(),
@@ -211,9 +201,6 @@ pub struct BenchArgs {
     /// How long to measure, after 2 s of warm-up (e.g. 20s).
     #[arg(long, default_value = "20s", value_parser = crate::demo::parse_duration)]
     pub duration: Duration,
-    /// Publish the next tick as soon as every robot decided (the maximum rate).
-    #[arg(long)]
-    pub free: bool,
     #[arg(long, default_value = "3", value_parser = crate::world_args::parse_scenario)]
     pub scenario: spwi_world::world::Scenario,
     /// The spwi-agent binary (default: next to this one).
@@ -260,7 +247,6 @@ pub fn main(a: BenchArgs) -> Result<()> {
     let BenchArgs {
         robots,
         duration,
-        free,
         scenario,
         agent,
         models,
@@ -294,7 +280,7 @@ pub fn main(a: BenchArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let report = rt.block_on(run(&BenchOptions { fleet, duration, free_running: free, scenario, router_down_at }))?;
+    let report = rt.block_on(run(&BenchOptions { fleet, duration, scenario, router_down_at }))?;
     print(&report);
     write_json(json.as_deref(), &report)
 }

@@ -372,7 +372,6 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
             seed: opts.seed,
             layout: opts.layout.clone(),
             zenoh: hub.peer_config()?,
-            tick: TICK_PERIOD,
             stuck_slot: None,
         },
         world_rx,
@@ -560,7 +559,7 @@ mod tests {
             tick,
             steps: vec![StepVote { class, confidence: 0.8 }],
             visibility: 2,
-            trust: 1.0,
+            worker: None,
             quality: 1.0,
             signature: Vec::new(),
         };

@@ -22,7 +22,7 @@ impl StuckCamera {
     /// What the stuck camera delivers instead of `frame`.
     pub fn pass(&mut self, frame: DetectionFrame) -> DetectionFrame {
         match &self.frozen {
-            Some(f) => DetectionFrame { tick: frame.tick, ..f.clone() },
+            Some(f) => DetectionFrame { capture_us: frame.capture_us, ..f.clone() },
             None => {
                 if frame.human.is_some() {
                     self.frozen = Some(frame.clone());
@@ -50,7 +50,7 @@ impl LoopingCamera {
         }
         let old = &self.clip[self.played % LOOP_TICKS];
         self.played += 1;
-        DetectionFrame { tick: frame.tick, ..old.clone() }
+        DetectionFrame { capture_us: frame.capture_us, ..old.clone() }
     }
 }
 
@@ -71,11 +71,11 @@ mod tests {
             world.step();
             let live = world.observe(0, &id);
             let out = cam.pass(live.clone());
-            assert_eq!(out.tick, live.tick);
+            assert_eq!(out.capture_us, live.capture_us);
             match &first_seen {
                 None if live.human.is_some() => first_seen = Some(live),
                 None => assert_eq!(out, live, "nothing to freeze on yet"),
-                Some(f) => assert_eq!(DetectionFrame { tick: f.tick, ..out }, *f),
+                Some(f) => assert_eq!(DetectionFrame { capture_us: f.capture_us, ..out }, *f),
             }
         }
         assert!(first_seen.is_some(), "robot 0 saw the worker in 30 s");
@@ -92,7 +92,7 @@ mod tests {
             world.step();
             let live = world.observe(0, &id);
             let out = cam.pass(live.clone());
-            assert_eq!(out.tick, live.tick);
+            assert_eq!(out.capture_us, live.capture_us);
             if clip.len() < LOOP_TICKS {
                 if !clip.is_empty() || live.human.is_some() {
                     clip.push(live.clone());
@@ -104,7 +104,10 @@ mod tests {
         }
         assert!(played.len() > 2 * LOOP_TICKS, "robot 0 saw the worker early enough");
         for (i, p) in played.iter().enumerate() {
-            assert_eq!(DetectionFrame { tick: clip[i % LOOP_TICKS].tick, ..p.clone() }, clip[i % LOOP_TICKS]);
+            assert_eq!(
+                DetectionFrame { capture_us: clip[i % LOOP_TICKS].capture_us, ..p.clone() },
+                clip[i % LOOP_TICKS]
+            );
         }
         assert!(played.windows(2).any(|w| w[0].human != w[1].human), "the clip moves");
     }

@@ -1,8 +1,9 @@
 //! `spwi-sim world`: the simulated world as a Zenoh service. It watches the fleet's
 //! liveliness tokens; each robot that joins takes the next free robot slot of the
-//! layout (its spawn pose and patrol), one that leaves frees it. Every tick (10 Hz) it
-//! publishes each live robot's detection frame, exactly as a detector node on that
-//! robot would, and the ground truth for scoring. `--stuck-slot S` freezes the camera
+//! layout (its spawn pose and patrol), one that leaves frees it. Every tick of the
+//! fleet's clock (10 Hz, the host's wall clock) it publishes each live robot's detection
+//! frame stamped with the tick's start, exactly as a detector node on that robot would,
+//! and the ground truth for scoring. `--stuck-slot S` freezes the camera
 //! of whichever robot holds slot S on its first frame showing the worker (a fault for
 //! end-to-end tests; robot ids in a container fleet are not known in advance, slots are).
 
@@ -28,7 +29,6 @@ pub struct WorldOptions {
     pub seed: u64,
     pub layout: Layout,
     pub zenoh: zenoh::Config,
-    pub tick: Duration,
     /// The layout slot whose camera is stuck, if any.
     pub stuck_slot: Option<usize>,
 }
@@ -86,8 +86,12 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
     let mut slots = Slots::new(world.robots.len());
     let mut stuck = StuckCamera::default();
     let truth_key = keys::truth(&opts.fleet);
-    let mut interval = tokio::time::interval(opts.tick);
-    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    // Frames are stamped on the fleet's clock, a few ms into each of its periods, as
+    // cameras triggered on it would: a restarted world goes on at the current tick.
+    let clock = spwi_agent::clock::FleetClock::default();
+    let into_next = tick_start(tick_at(clock.now()) + 1) + Duration::from_millis(5);
+    let mut interval = tokio::time::interval_at(tokio::time::Instant::now() + clock.until(into_next), TICK_PERIOD);
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     tracing::info!(fleet = %opts.fleet, scenario = opts.scenario as u8, seed = opts.seed, "world running");
     loop {
         tokio::select! {
@@ -105,6 +109,7 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
             }
             _ = interval.tick() => {
                 world.step();
+                world.follow_clock(clock.now());
                 let assigned = slots.assigned();
                 for (slot, robot) in &assigned {
                     let mut frame = world.observe(*slot, robot);
@@ -146,9 +151,6 @@ pub struct WorldServiceArgs {
     /// Zenoh setting override KEY:VALUE (VALUE in json5), repeatable.
     #[arg(long = "cfg", value_name = "KEY:VALUE")]
     pub cfg: Vec<String>,
-    /// Tick period in milliseconds.
-    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=10_000))]
-    pub tick_ms: u64,
     /// Freeze the camera of the robot in this layout slot on its first frame that shows
     /// the worker (a fault to test the fleet with).
     #[arg(long, value_name = "SLOT")]
@@ -157,7 +159,7 @@ pub struct WorldServiceArgs {
 
 /// `spwi-sim world`: parses nothing more, runs the tool.
 pub fn main(a: WorldServiceArgs) -> Result<()> {
-    let WorldServiceArgs { fleet, fleet_dir, identity, world, seed, zenoh_config, cfg, tick_ms, stuck_slot } = a;
+    let WorldServiceArgs { fleet, fleet_dir, identity, world, seed, zenoh_config, cfg, stuck_slot } = a;
     init_tracing(LogFormat::Human);
     let mut zenoh = spwi_agent::zenoh_config::build(zenoh_config.as_deref(), &cfg)?;
     let credentials =
@@ -170,15 +172,8 @@ pub fn main(a: WorldServiceArgs) -> Result<()> {
         }
         tracing::warn!(slot = s, "the camera of the robot in slot {s} will freeze on its first sight of the worker");
     }
-    let opts = crate::service::WorldOptions {
-        fleet,
-        scenario: world.scenario,
-        seed,
-        layout: floor.layout,
-        zenoh,
-        tick: Duration::from_millis(tick_ms),
-        stuck_slot,
-    };
+    let opts =
+        crate::service::WorldOptions { fleet, scenario: world.scenario, seed, layout: floor.layout, zenoh, stuck_slot };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     rt.block_on(async {
         let (tx, rx) = tokio::sync::watch::channel(false);

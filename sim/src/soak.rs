@@ -129,7 +129,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     let mut world = World::new(layout_with_slots(robots), o.scenario, 1, robots);
     let resources = |fleet: &LoopbackFleet| -> Vec<Usage> { untouched.clone().map(|slot| fleet.usage(slot)).collect() };
     let started = Instant::now();
-    let mut next = Instant::now();
+    let mut next = crate::loopback::next_tick_instant();
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
     let mut events: Vec<(u64, Event)> = Vec::new();
     let (mut measure_from, mut at_start) = (None, Vec::new());
@@ -144,7 +144,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
         let since = started.elapsed();
         if measure_from.is_none() && since >= WARMUP {
             at_start = resources(&fleet);
-            measure_from = Some((Instant::now(), world.tick + 1));
+            measure_from = Some((Instant::now(), world.clock_tick() + 1));
         }
         if since >= WARMUP + o.duration {
             break;
@@ -162,22 +162,23 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
                 fleet.start_agent(churning)?;
                 Event::Join
             };
-            events.push((world.tick, event));
+            events.push((world.clock_tick(), event));
             next_churn += o.churn;
         }
         if thaw_at.is_none() && since >= next_freeze {
             fleet.signal_agent(freezing, "STOP")?;
-            events.push((world.tick, Event::Freeze));
+            events.push((world.clock_tick(), Event::Freeze));
             thaw_at = Some(since + FREEZE_FOR);
             next_freeze += o.freeze_every;
         }
         if thaw_at.is_some_and(|t| since >= t) {
             fleet.signal_agent(freezing, "CONT")?;
-            events.push((world.tick, Event::Thaw));
+            events.push((world.clock_tick(), Event::Thaw));
             thaw_at = None;
         }
         world.step();
-        published.insert(world.tick, fleet.publish(&mut world).await?);
+        let sent = fleet.publish(&mut world).await?;
+        published.insert(world.clock_tick(), sent);
         if measure_from.is_some() {
             progress.inc();
         }
@@ -197,7 +198,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
     drop(fleet);
 
     let settle_ticks = (SETTLE.as_secs_f64() / TICK_PERIOD.as_secs_f64()).round() as u64;
-    let last_tick = world.tick;
+    let last_tick = world.clock_tick();
     let mut report = SoakReport {
         robots,
         seconds,

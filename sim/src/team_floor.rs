@@ -69,7 +69,7 @@ impl TeamFloor {
             .zip(frames)
             .map(|(v, f)| {
                 let (estimate, landmarks) = v.observe(f);
-                Shared { tick: f.tick, estimate, facing: v.camera().facing_in(f), landmarks }
+                Shared { tick: f.tick(), estimate, facing: v.camera().facing_in(f), landmarks }
             })
             .collect();
         let mut heard = Vec::with_capacity(self.views.len());

@@ -46,14 +46,15 @@ pub fn models() -> Arc<ModelSet> {
     ModelSet::load(&models_dir(), Backend::Tract, None).expect("fixture models")
 }
 
-/// A frame for `robot` at `tick`: the worker is seen unless `tick % 11 == robot_index`.
+/// A frame for `robot` captured at the start of `tick`: the worker is seen unless
+/// `tick % 11 == robot_index`.
 pub fn scripted_frame(robot: &RobotId, index: usize, tick: u64) -> DetectionFrame {
     let seed = tick as f32 * 0.21 + index as f32 * 1.7;
     let feat = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.05 + k + seed).sin()).collect::<Vec<_>>();
     let x = 100.0 + ((tick as f32 * 0.05 + index as f32).sin() + 1.0) * 200.0;
     DetectionFrame {
         robot: robot.clone(),
-        tick,
+        capture_us: DetectionFrame::capture_at_tick(tick),
         pose: Some(FloorPose { position: [3.0 * index as f32, 0.0], heading: 0.1 * index as f32 }),
         image_size: [640.0, 480.0],
         human: (tick % 11 != index as u64).then(|| HumanDetection {
@@ -73,38 +74,60 @@ pub fn scripted_frame(robot: &RobotId, index: usize, tick: u64) -> DetectionFram
     }
 }
 
-/// Publishes a frame per robot per tick at `period`, from the hub, until dropped.
+/// The tick of the fleet's clock now (the host's wall clock).
+pub fn clock_tick() -> u64 {
+    tick_at(spwi_agent::clock::FleetClock::default().now())
+}
+
+/// Publishes a frame per robot per tick of the fleet's clock, captured at the tick's
+/// start, from the hub, until dropped: a detector node on each robot would.
 pub struct Publisher {
     task: JoinHandle<()>,
-    pub tick: Arc<Mutex<u64>>,
+    /// (the first tick published, the latest), on the fleet's clock.
+    ticks: Arc<Mutex<Option<(u64, u64)>>>,
 }
 
 impl Publisher {
     pub fn start(hub: &Hub, robots: Vec<RobotId>, period: Duration) -> Publisher {
         let session = hub.session.clone();
         let fleet = hub.fleet.clone();
-        let tick = Arc::new(Mutex::new(0u64));
-        let t = tick.clone();
+        let ticks = Arc::new(Mutex::new(None));
+        let t = ticks.clone();
         let task = tokio::spawn(async move {
-            let mut interval = tokio::time::interval(period);
+            let clock = spwi_agent::clock::FleetClock::default();
+            // 5 ms into each period of the clock, as a camera triggered on it.
+            let into_next = tick_start(tick_at(clock.now()) + 1) + Duration::from_millis(5);
+            let start = tokio::time::Instant::now() + clock.until(into_next);
+            let mut interval = tokio::time::interval_at(start, period);
             loop {
                 interval.tick().await;
-                let now = {
+                let now = tick_at(clock.now());
+                {
                     let mut g = t.lock().unwrap();
-                    *g += 1;
-                    *g
-                };
+                    *g = Some((g.map_or(now, |(first, _)| first), now));
+                }
                 for (i, r) in robots.iter().enumerate() {
                     let bytes = encode(&scripted_frame(r, i, now));
                     let _ = session.put(keys::robot_topic(&fleet, r, Topic::Detections), bytes).await;
                 }
             }
         });
-        Publisher { task, tick }
+        Publisher { task, ticks }
     }
 
+    /// The latest tick published (the clock's tick before the first).
     pub fn current_tick(&self) -> u64 {
-        *self.tick.lock().unwrap()
+        self.ticks.lock().unwrap().map_or_else(clock_tick, |(_, last)| last)
+    }
+
+    /// The first tick published (the clock's tick before the first).
+    pub fn first_tick(&self) -> u64 {
+        self.ticks.lock().unwrap().map_or_else(clock_tick, |(first, _)| first)
+    }
+
+    /// How many ticks were published.
+    pub fn published(&self) -> u64 {
+        self.ticks.lock().unwrap().map_or(0, |(first, last)| last + 1 - first)
     }
 }
 

@@ -97,7 +97,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
                 tick: 1,
                 steps: vec![StepVote { class: Station::Workstation, confidence: 0.5 }],
                 visibility: 1,
-                trust: 1.0,
+                worker: None,
                 quality: 1.0,
                 signature: Vec::new(),
             }),

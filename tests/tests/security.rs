@@ -119,7 +119,7 @@ async fn impersonate(session: zenoh::Session, fleet: FleetId, robot: RobotId, pe
         tick: 0,
         steps: vec![StepVote { class: Station::Manufacturing, confidence: 1.0 }],
         visibility: 1000,
-        trust: 1.0,
+        worker: None,
         quality: 1.0,
         signature: Vec::new(),
     };
@@ -179,7 +179,7 @@ fn agent_as(hub: &Hub, robot: &str, zenoh: zenoh::Config, credentials: Option<Ar
 async fn run_ticks(hub: &Hub, robots: Vec<RobotId>, ticks: u64) {
     let publisher = Publisher::start(hub, robots, TICK);
     within!(ticks as f64 * 0.1 + 20.0, "ticks to pass", async {
-        while publisher.current_tick() < ticks {
+        while publisher.published() < ticks {
             tokio::time::sleep(TICK).await;
         }
     });

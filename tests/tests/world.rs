@@ -44,7 +44,6 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
             seed: 11,
             layout: Layout::default_layout(),
             zenoh: hub.peer_config().unwrap(),
-            tick: Duration::from_millis(100),
             stuck_slot: None,
         };
         let world = tokio::spawn(service::run(opts, rx));
@@ -97,7 +96,6 @@ async fn a_robot_whose_camera_freezes_leaves_the_vote_and_the_others_carry_on() 
             seed: 11,
             layout: Layout::default_layout(),
             zenoh: hub.peer_config().unwrap(),
-            tick: Duration::from_millis(100),
             stuck_slot: Some(0),
         };
         let world = tokio::spawn(service::run(opts, rx));

@@ -118,7 +118,7 @@ pub struct Scene<'a> {
 pub fn detect(
     scene: &Scene<'_>,
     robot: RobotId,
-    tick: u64,
+    capture_us: u64,
     pose: Pose,
     // this robot's own entry in `scene.occluders`
     own_occluder: Option<usize>,
@@ -218,7 +218,7 @@ pub fn detect(
     let scene_feature = scene.appearance.scene(&seen_classes, rng);
     DetectionFrame {
         robot,
-        tick,
+        capture_us,
         pose: Some(FloorPose { position: pose.position, heading: pose.heading }),
         image_size: [cam.image[0] as f32, cam.image[1] as f32],
         human,

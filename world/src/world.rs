@@ -107,6 +107,11 @@ pub struct World {
     pub layout: Layout,
     pub scenario: Scenario,
     pub tick: u64,
+    /// The capture time stamped on tick 0's frames (µs since the Unix epoch): frames of
+    /// tick `t` are stamped `clock_epoch_us + t · TICK_US`. 0 for a virtual clock (the
+    /// evaluation, datasets); a world serving live agents follows the wall clock
+    /// ([`World::follow_clock`]).
+    pub clock_epoch_us: u64,
     pub worker: Worker,
     pub robots: Vec<RobotState>,
     objects: Vec<Object>,
@@ -144,6 +149,7 @@ impl World {
             layout,
             scenario,
             tick: 0,
+            clock_epoch_us: 0,
             worker,
             robots,
             objects,
@@ -233,6 +239,25 @@ impl World {
         }));
     }
 
+    /// When this tick's frames are captured (µs since the Unix epoch).
+    pub fn capture_us(&self) -> u64 {
+        self.clock_epoch_us + DetectionFrame::capture_at_tick(self.tick)
+    }
+
+    /// Stamps this tick's frames (and the ticks after, one period each) with the start
+    /// of the fleet clock's tick that `now` (time since the Unix epoch) falls in: a
+    /// world that serves live agents stamps its frames as a camera on the fleet's clock
+    /// would, whenever it was started or restarted.
+    pub fn follow_clock(&mut self, now: std::time::Duration) {
+        let start = DetectionFrame::capture_at_tick(tick_at(now));
+        self.clock_epoch_us = start.saturating_sub(DetectionFrame::capture_at_tick(self.tick));
+    }
+
+    /// The fleet clock's tick this world tick's frames are stamped with.
+    pub fn clock_tick(&self) -> u64 {
+        self.capture_us() / TICK_US
+    }
+
     /// The detection frame of the robot in `slot`, published as `robot`.
     pub fn observe(&mut self, slot: usize, robot: &RobotId) -> DetectionFrame {
         let first_object = if self.scenario.obstacles() { self.layout.obstacles.len() } else { 0 };
@@ -245,8 +270,9 @@ impl World {
             worker: &self.worker,
             appearance: &self.appearance,
         };
+        let capture_us = self.capture_us();
         let r = &mut self.robots[slot];
-        let frame = camera::detect(&scene, robot.clone(), self.tick, r.pose, Some(own), &mut r.detector, &mut r.rng);
+        let frame = camera::detect(&scene, robot.clone(), capture_us, r.pose, Some(own), &mut r.detector, &mut r.rng);
         if frame.human.is_some() && r.in_fleet {
             r.pan.saw_worker(self.tick);
             self.sightings.record(self.worker.position, self.tick);
@@ -257,7 +283,7 @@ impl World {
     /// Ground truth for this tick.
     pub fn truth(&self, robots: &[(usize, RobotId)]) -> TruthMsg {
         TruthMsg {
-            tick: self.tick,
+            tick: self.clock_tick(),
             intent: self.worker.goal,
             phase: self.worker.phase,
             worker_position: self.worker.position,

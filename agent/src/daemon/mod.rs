@@ -19,12 +19,13 @@ mod log;
 pub mod memory;
 mod publishing;
 
+use crate::clock::FleetClock;
 use crate::config::AgentConfig;
 use crate::engine::{Engine, EngineConfig, Input, Output};
 use crate::metrics::{DropReason, TransportCounters};
 use crate::model::ModelSet;
 use crate::record::{PeerState, RecordedConfig, Recorder};
-use crate::status::{RecentDecision, SharedStatus, Status};
+use crate::status::{Health, RecentDecision, SharedStatus, Status};
 use anyhow::Result;
 use connection::{Connection, Membership, Message};
 use log::RateLimitedLog;
@@ -108,6 +109,8 @@ pub async fn run(
         trust: Default::default(),
         metrics: engine.metrics().clone(),
         transport: TransportCounters::default(),
+        clocks: Default::default(),
+        health: Health::new(Duration::from_millis(config.http.unhealthy_after_ms)),
     }));
     let mut http_task = None;
     let mut http_addr = None;
@@ -122,13 +125,24 @@ pub async fn run(
         let _ = ready.send(Started { status: status.clone(), http: http_addr });
     }
 
-    let mut signed_votes = credentials.map(|c| crate::fleet::signed_votes::SignedVotes::new(c, robot.clone()));
-    let start = Instant::now();
+    let mut signed_votes =
+        credentials.map(|c| crate::fleet::signed_votes::SignedVotes::new(c, fleet.clone(), robot.clone()));
+    let clock = FleetClock::with_offset_ms(config.tick.clock_offset_ms);
+    if config.tick.clock_offset_ms != 0 {
+        tracing::warn!(
+            offset_ms = config.tick.clock_offset_ms,
+            "this robot's clock is shifted on purpose (tick.clock_offset_ms): for tests only"
+        );
+    }
+    let window = engine.config().window;
+    let mut health = Health::new(Duration::from_millis(config.http.unhealthy_after_ms));
+    let mut next_refresh = Instant::now();
     let mut bad_log = RateLimitedLog::new(Duration::from_secs(5));
     let mut slow_log = RateLimitedLog::new(Duration::from_secs(5));
     let mut transport = TransportCounters::default();
     loop {
-        let deadline = engine.next_deadline().map(|d| tokio::time::Instant::from_std(start + d));
+        let deadline = engine.next_deadline().map(|d| tokio::time::Instant::now() + clock.until(d));
+        let refresh_at = tokio::time::Instant::from_std(next_refresh);
         let mut input = tokio::select! {
             _ = shutdown.changed() => break,
             Some(Membership { robot: r, alive }) = conn.membership.recv() => {
@@ -147,8 +161,13 @@ pub async fn run(
                 },
             },
             _ = sleep_until(deadline) => Input::Poll,
+            _ = tokio::time::sleep_until(refresh_at) => Input::Poll,
         };
-        if let Some(s) = signed_votes.as_mut() {
+        let now = clock.now();
+        // A tick off our clock is refused by the engine; its votes are not worth
+        // checking a signature for.
+        let on_clock = input.tick().is_none_or(|t| window.refuses(t, now).is_none());
+        if let (Some(s), true) = (signed_votes.as_mut(), on_clock) {
             let forged = s.check(&mut input);
             if forged > 0 {
                 transport.bad_messages(DropReason::ForgedRelayedVote, forged as u64);
@@ -156,7 +175,10 @@ pub async fn run(
             }
         }
         let membership_change = matches!(input, Input::MemberJoined(_) | Input::MemberLeft(_));
-        let now = start.elapsed();
+        if matches!(input, Input::Frame(_)) {
+            health.frame(Instant::now());
+        }
+        let handled_at = Instant::now();
         if let Some(r) = recorder.as_mut() {
             if let Err(e) = r.input(&input, now) {
                 tracing::error!("recording stopped: {e:#}");
@@ -164,7 +186,7 @@ pub async fn run(
             }
         }
         let outputs = engine.handle(input, now);
-        let took = start.elapsed() - now;
+        let took = handled_at.elapsed();
         if took > TICK_PERIOD {
             slow_log
                 .warn(|| format!("one event took {} ms, longer than a tick: decisions will be late", took.as_millis()));
@@ -189,7 +211,13 @@ pub async fn run(
                 bad_log.warn(|| "Zenoh is holding up publishing: dropping outgoing messages".to_owned());
             }
         }
-        if !decided.is_empty() || membership_change {
+        if !decided.is_empty() {
+            health.decision(Instant::now());
+        }
+        // After a decision or a membership change, and at least twice a second
+        // whatever peers send: /status and /metrics follow the engine.
+        if !decided.is_empty() || membership_change || Instant::now() >= next_refresh {
+            next_refresh = Instant::now() + STATUS_REFRESH;
             let lost = conn.overflow.swap(0, Ordering::Relaxed);
             if lost > 0 {
                 transport.bad_messages(DropReason::QueueFull, lost);
@@ -197,6 +225,8 @@ pub async fn run(
             transport.outgoing_dropped += outbox.take_dropped();
             if let Ok(mut s) = status.lock() {
                 s.refresh(&engine, &transport, decided);
+                health.problem = health.check(Instant::now());
+                s.health = health.clone();
             }
         }
     }
@@ -216,6 +246,9 @@ pub async fn run(
     }
     Ok(())
 }
+
+/// How often `/status` and `/metrics` are refreshed at least.
+const STATUS_REFRESH: Duration = Duration::from_millis(500);
 
 fn decode_input(topic: Topic, robot: &RobotId, bytes: &[u8]) -> Result<Input, DecodeError> {
     Ok(match topic {

@@ -5,7 +5,10 @@
 //! secured fleet every robot signs its vote with its fleet key (Ed25519 is
 //! deterministic: the copy it relays later carries the same signature), and a relayed
 //! vote of another robot counts only if its origin's signature verifies against the
-//! roster. The relayer's own vote in its ballots needs none: its link vouches for it.
+//! roster. The signature covers the fleet, the voter's instance (its run) and the tick
+//! (a period of the fleet's clock), so a vote recorded elsewhere or earlier is refused:
+//! by its signature in another fleet, by the engine's clock window after a restart, and
+//! by the engine's check of the origin's live instance within the window. The relayer's own vote in its ballots needs none: its link vouches for it.
 //! A vote already heard directly or already verified is recognised by its bytes and
 //! not verified again, so each distinct vote costs at most one verification.
 //!
@@ -14,7 +17,7 @@
 
 use super::Credentials;
 use crate::engine::{Input, Output};
-use spwi_proto::{RobotId, VoteMsg};
+use spwi_proto::{FleetId, RobotId, VoteMsg};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
@@ -24,6 +27,8 @@ const KEEP_TICKS: u64 = 100;
 /// Signs this robot's votes and checks the relayed votes of others.
 pub struct SignedVotes {
     creds: Arc<Credentials>,
+    /// Signatures cover the fleet: a vote signed for one fleet counts in no other.
+    fleet: FleetId,
     robot: RobotId,
     /// Votes known authentic, as signed bytes, by tick and origin.
     known: BTreeMap<u64, HashMap<RobotId, Vec<u8>>>,
@@ -33,8 +38,8 @@ pub struct SignedVotes {
 }
 
 impl SignedVotes {
-    pub fn new(creds: Arc<Credentials>, robot: RobotId) -> SignedVotes {
-        SignedVotes { creds, robot, known: BTreeMap::new(), own: None }
+    pub fn new(creds: Arc<Credentials>, fleet: FleetId, robot: RobotId) -> SignedVotes {
+        SignedVotes { creds, fleet, robot, known: BTreeMap::new(), own: None }
     }
 
     /// Signs this robot's own votes in an output (its vote in its share of a tick, the
@@ -47,7 +52,7 @@ impl SignedVotes {
             _ => return,
         };
         for v in own.iter_mut().filter(|v| v.robot == self.robot && v.signature.is_empty()) {
-            let bytes = v.signed_bytes();
+            let bytes = v.signed_bytes(&self.fleet);
             v.signature = match &self.own {
                 Some((signed, signature)) if *signed == bytes => signature.clone(),
                 _ => {
@@ -66,7 +71,7 @@ impl SignedVotes {
         match input {
             Input::Embedding(e) if e.robot != self.robot => {
                 if let Some(v) = &e.vote {
-                    let bytes = v.signed_bytes();
+                    let bytes = v.signed_bytes(&self.fleet);
                     self.remember(v, bytes);
                 }
                 0
@@ -82,7 +87,7 @@ impl SignedVotes {
     }
 
     fn authentic(&mut self, v: &VoteMsg) -> bool {
-        let bytes = v.signed_bytes();
+        let bytes = v.signed_bytes(&self.fleet);
         if self.known.get(&v.tick).and_then(|m| m.get(&v.robot)) == Some(&bytes) {
             return true;
         }
@@ -120,8 +125,8 @@ mod tests {
             tick,
             steps: vec![StepVote { class: Station::Workstation, confidence }],
             visibility: 1,
-            trust: 1.0,
             quality: 1.0,
+            worker: None,
             signature: Vec::new(),
         }
     }
@@ -131,8 +136,10 @@ mod tests {
         let members = [("a", Role::Robot), ("b", Role::Robot), ("c", Role::Robot)];
         let fleet = ThrowawayFleet::create("signed", &FleetId::new("f").unwrap(), &members).unwrap();
         let creds = |r: &str| Arc::new(Credentials::load(&fleet.dir, r).unwrap());
-        let (mut a, mut b) = (SignedVotes::new(creds("a"), id("a")), SignedVotes::new(creds("b"), id("b")));
-        let c = || SignedVotes::new(creds("c"), id("c"));
+        let f = FleetId::new("f").unwrap();
+        let signing = |r: &str| SignedVotes::new(creds(r), f.clone(), id(r));
+        let (mut a, mut b) = (signing("a"), signing("b"));
+        let c = || signing("c");
         let share = |v: VoteMsg| EmbeddingMsg {
             robot: v.robot.clone(),
             instance: v.instance,
@@ -179,5 +186,9 @@ mod tests {
         assert_eq!(c.check(&mut Input::Embedding(share(from_a.clone()))), 0);
         assert_eq!(c.check(&mut ballots(vec![vote("a", 5, 0.9)])), 0, "the very vote heard directly");
         assert_eq!(c.check(&mut ballots(vec![forged])), 1);
+        // a's vote signed for another fleet of the same CA counts in no other
+        let elsewhere = SignedVotes::new(creds("c"), FleetId::new("g").unwrap(), id("c"));
+        let mut elsewhere = elsewhere;
+        assert_eq!(elsewhere.check(&mut ballots(vec![from_a])), 1, "signed for fleet f, not g");
     }
 }

@@ -51,15 +51,15 @@ impl FloorView {
         let Some(pose) = frame.pose else { return (None, Vec::new()) };
         if let Some(h) = &frame.human {
             if let Some((z, sigma)) = self.camera.worker_on_floor(&pose, &h.keypoints) {
-                self.track.observe(frame.tick, z, sigma);
+                self.track.observe(frame.tick(), z, sigma);
             }
         }
         let landmarks = self.camera.landmarks(&pose, &frame.objects);
         for l in &landmarks {
-            self.own_map.add(l, frame.tick);
-            self.team_map.add(l, frame.tick);
+            self.own_map.add(l, frame.tick());
+            self.team_map.add(l, frame.tick());
         }
-        (self.track.estimate(frame.tick), landmarks)
+        (self.track.estimate(frame.tick()), landmarks)
     }
 
     /// This robot's own estimate of the worker at `tick` (what it shares).

@@ -10,7 +10,7 @@ pub fn frame(tick: u64, objects: usize) -> DetectionFrame {
     let feature = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.013 + k).sin()).collect::<Vec<_>>();
     DetectionFrame {
         robot: RobotId::new("synthetic").unwrap(),
-        tick,
+        capture_us: DetectionFrame::capture_at_tick(tick),
         pose: Some(FloorPose { position: [2.0, 3.0], heading: 0.4 }),
         image_size: [640.0, 480.0],
         human: Some(HumanDetection {

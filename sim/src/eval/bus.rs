@@ -11,6 +11,7 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use spwi_agent::engine::{Engine, Input, Output};
+use spwi_proto::{RobotId, Station, StepVote, VoteMsg, MAX_OBJECTS};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -38,6 +39,8 @@ pub struct Bus {
     net: Net,
     rng: ChaCha8Rng,
     logs: Option<Vec<Log>>,
+    /// Per engine: the station it lies about, if it lies ([`Bus::lie`]).
+    lies: Vec<Option<Station>>,
 }
 
 impl Bus {
@@ -54,6 +57,7 @@ impl Bus {
             net,
             rng,
             logs: record.then(|| vec![Vec::new(); n]),
+            lies: vec![None; n],
         };
         for me in 0..n {
             for other in (0..n).filter(|&o| o != me) {
@@ -70,6 +74,14 @@ impl Bus {
 
     pub fn is_live(&self, slot: usize) -> bool {
         self.live[slot]
+    }
+
+    /// From now on engine `slot` tells its peers it votes `station` for every step at
+    /// confidence 1, with a full view and as many detections as a frame holds, in its
+    /// share of every tick and in the ballots it relays (`None`: the truth again). Its
+    /// own engine runs on unaware: the lie is in what the others receive.
+    pub fn lie(&mut self, slot: usize, station: Option<Station>) {
+        self.lies[slot] = station;
     }
 
     /// Queues `input` for engine `to` at time `at`.
@@ -124,8 +136,24 @@ impl Bus {
 
     fn broadcast(&mut self, from: usize, at: Duration, o: &Output) {
         let input = match o {
-            Output::Embedding(e) => Input::Embedding(e.clone()),
-            Output::Ballots(b) => Input::Ballots(b.clone()),
+            Output::Embedding(e) => {
+                let mut e = e.clone();
+                if let Some(s) = self.lies[from] {
+                    let horizon = self.engines[from].horizon();
+                    e.vote = Some(lie(&e.robot, e.instance, e.tick, s, horizon));
+                    e.visibility = MAX_OBJECTS as u32 + 1;
+                }
+                Input::Embedding(e)
+            }
+            Output::Ballots(b) => {
+                let mut b = b.clone();
+                if let Some(s) = self.lies[from] {
+                    let horizon = self.engines[from].horizon();
+                    b.votes.retain(|v| v.robot != b.robot);
+                    b.votes.push(lie(&b.robot, b.instance, b.tick, s, horizon));
+                }
+                Input::Ballots(b)
+            }
             // Robots read neither votes alone nor decisions: both come in their
             // peers' embedding messages (the vote, the verdict).
             Output::Vote(_) | Output::Decision(_) => return,
@@ -146,6 +174,20 @@ impl Bus {
     /// What each engine was given and said (when built with `record`).
     pub fn into_logs(self) -> Option<Vec<Log>> {
         self.logs
+    }
+}
+
+/// A liar's vote: `station` at every step, sure of it, seeing all.
+fn lie(robot: &RobotId, instance: u64, tick: u64, station: Station, horizon: usize) -> VoteMsg {
+    VoteMsg {
+        robot: robot.clone(),
+        instance,
+        tick,
+        steps: vec![StepVote { class: station, confidence: 1.0 }; horizon + 1],
+        visibility: MAX_OBJECTS as u32 + 1,
+        quality: 1.0,
+        worker: None,
+        signature: Vec::new(),
     }
 }
 

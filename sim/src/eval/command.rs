@@ -44,6 +44,10 @@ pub struct EvalArgs {
     /// worker it recorded once.
     #[arg(long, default_value_t = 0)]
     pub looping: usize,
+    /// Robots (the slots after the lying cameras) that vote a wrong station every tick
+    /// at confidence 1, claiming the best view: members whose word is false.
+    #[arg(long, default_value_t = 0)]
+    pub liars: usize,
     /// Seconds the fleet has already worked on the floor when an episode starts: its
     /// station maps are what its robots built watching another worker that long (0:
     /// every episode starts with empty maps, a fleet's first seconds on a new floor).
@@ -87,6 +91,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         loss,
         faulty,
         looping,
+        liars,
         warm_map,
         delay,
         agent_config,
@@ -104,9 +109,9 @@ pub fn main(a: EvalArgs) -> Result<()> {
     if !(0.0..=10_000.0).contains(&delay) {
         anyhow::bail!("--delay {delay}: milliseconds, 0 to 10000");
     }
-    if dropouts >= robots || faulty + looping >= robots {
+    if dropouts >= robots || faulty + looping + liars >= robots {
         anyhow::bail!(
-            "--dropouts {dropouts} / --faulty {faulty} + --looping {looping}: must leave at least one of the {robots} robots working"
+            "--dropouts {dropouts} / --faulty {faulty} + --looping {looping} + --liars {liars}: must leave at least one of the {robots} robots working"
         );
     }
     let tick = match &agent_config {
@@ -172,7 +177,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         episodes,
         seed,
         ticks,
-        faults: crate::eval::Faults { dropouts, loss, faulty, looping, delay_ms: delay },
+        faults: crate::eval::Faults { dropouts, loss, faulty, looping, liars, delay_ms: delay },
         tick,
         warm_map_ticks: warm_map * 10,
         cnn1d: true,

@@ -54,7 +54,8 @@ pub struct Tallies {
     pub long_walks: [PhaseTallies; Route::ALL.len()],
     /// Per robot slot: gnn, ego, collective.
     pub per_robot: Vec<[Tally; 3]>,
-    /// Per robot slot: the sum of the trust its votes carried, and their number.
+    /// Per robot slot: the sum over its votes of the trust the other robots held of it,
+    /// and the number of its votes.
     pub vote_trust: Vec<(f64, u64)>,
     pub confusion_ego: Confusion,
     pub confusion_collective: Confusion,
@@ -380,6 +381,11 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
         let tick = world.tick;
         let now = TICK * tick as u32;
+        // Liars vote a station the worker is not heading to, every tick.
+        for slot in o.faults.lying()..o.faults.untrue() {
+            let wrong = Station::ALL[(world.worker.goal.index() + 1) % NUM_CLASSES];
+            bus.lie(slot, Some(wrong));
+        }
         if o.faults.dropouts > 0 && step == ticks / 2 {
             for slot in n.saturating_sub(o.faults.dropouts)..n {
                 bus.leave(slot, now);
@@ -406,23 +412,29 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let mut votes: Vec<Option<Vec<Station>>> = vec![None; n];
         let mut decided: Vec<Option<Vec<Station>>> = vec![None; n];
         let (mut messages, mut bytes) = (0, 0);
-        let vote_trust = &mut tallies.vote_trust;
         bus.run_until(now + TICK, |slot, _, out| {
             messages += 1;
             bytes += encoded_len(out);
             match out {
                 Output::Embedding(e) if e.tick == tick => embeddings[slot] = e.embedding.clone(),
-                Output::Vote(v) if v.tick == tick => {
-                    votes[slot] = Some(v.steps.iter().map(|s| s.class).collect());
-                    vote_trust[slot].0 += f64::from(v.trust);
-                    vote_trust[slot].1 += 1;
-                }
+                Output::Vote(v) if v.tick == tick => votes[slot] = Some(v.steps.iter().map(|s| s.class).collect()),
                 Output::Decision(d) if d.tick == tick => {
                     decided[slot] = Some(d.steps.iter().map(|s| s.class).collect())
                 }
                 _ => {}
             }
         });
+        // What a vote weighed: the trust the other live robots hold of its voter.
+        for slot in (0..n).filter(|&s| votes[s].is_some()) {
+            let held: Vec<f64> = (0..n)
+                .filter(|&j| j != slot && bus.is_live(j))
+                .map(|j| f64::from(bus.engine(j).trust().get(&ids[slot]).copied().unwrap_or(1.0)))
+                .collect();
+            if !held.is_empty() {
+                tallies.vote_trust[slot].0 += held.iter().sum::<f64>() / held.len() as f64;
+                tallies.vote_trust[slot].1 += 1;
+            }
+        }
         tallies.messages += messages;
         tallies.bytes += bytes as u64;
         let mut per_robot = Vec::with_capacity(n);
@@ -439,7 +451,10 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             p.gnn = bus.engine(slot).spatial_logits(tick).map(|l| vote::top_station(&l));
             p.collective = votes[slot].take().filter(|_| seen);
             per_robot.push((slot, p));
-            decisions.push(decided[slot].take().unwrap_or_default());
+            // A liar's own decisions are not the team's to score.
+            if !(o.faults.lying()..o.faults.untrue()).contains(&slot) {
+                decisions.push(decided[slot].take().unwrap_or_default());
+            }
         }
         let farther = heads_for_farther(world.worker.position, world.worker.goal, &pairs, &spots);
         let phase = Phase::of(world.worker.phase == WorkerPhase::Stationary, ticks_on_goal);
@@ -480,7 +495,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
             if let Some(c) = &p.collective {
                 tallies.collective.add(c, truth);
-                if *slot >= o.faults.lying() {
+                if *slot >= o.faults.untrue() {
                     tallies.healthy_collective.add(c, truth);
                 }
                 if close {

@@ -66,6 +66,12 @@ pub struct Faults {
     /// Robots (the slots after the stuck ones) whose camera loops an old clip of the
     /// worker: every frame changes, none is true.
     pub looping: usize,
+    /// Robots (the slots after the lying cameras) that vote a wrong station for every
+    /// step of every tick at confidence 1, claiming a full view of the worker and as
+    /// many detections as a frame may hold: a member whose certificate is valid and
+    /// whose word is false. Its own decisions are not scored.
+    #[serde(default)]
+    pub liars: usize,
 }
 
 impl Faults {
@@ -77,6 +83,11 @@ impl Faults {
     /// Robots whose camera lies (stuck or looping): the lowest slots.
     pub fn lying(&self) -> usize {
         self.faulty + self.looping
+    }
+
+    /// Robots that lie, by camera or by vote: the lowest slots.
+    pub fn untrue(&self) -> usize {
+        self.lying() + self.liars
     }
 }
 
@@ -549,7 +560,7 @@ mod tests {
     #[test]
     fn the_same_seed_gives_the_same_figures() {
         let m = fixture();
-        let faults = Faults { loss: 0.2, dropouts: 1, faulty: 1, looping: 0, delay_ms: 5.0 };
+        let faults = Faults { loss: 0.2, dropouts: 1, faulty: 1, looping: 0, liars: 0, delay_ms: 5.0 };
         let a = run(&options(m.clone(), faults.clone())).unwrap();
         let b = run(&options(m, faults)).unwrap();
         assert_eq!(without_timings(&a), without_timings(&b));

@@ -92,7 +92,7 @@ impl Observers {
     /// The robot's frame of this tick (as its engine got it): the 1D-CNN's row and the
     /// constant-velocity model's track.
     pub fn see(&mut self, frame: &DetectionFrame) {
-        let t = frame.tick;
+        let t = frame.tick();
         self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
         self.facing = (self.row_layout == RowLayout::RelationsFacing).then(|| self.camera.facing_in(frame)).flatten();
         if self.cnn1d.is_some() {

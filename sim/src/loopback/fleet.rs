@@ -215,9 +215,11 @@ impl LoopbackFleet {
         Ok(())
     }
 
-    /// Publishes the world's frames of its current tick to every robot slot; returns
-    /// when the first was published (simulating the cameras is not the fleet's work).
+    /// Publishes the world's frames of its current tick to every robot slot, stamped
+    /// with the fleet clock's tick now ([`World::follow_clock`]); returns when the first
+    /// was published (simulating the cameras is not the fleet's work).
     pub async fn publish(&self, world: &mut World) -> Result<Instant> {
+        world.follow_clock(spwi_agent::clock::FleetClock::default().now());
         let frames: Vec<Vec<u8>> =
             self.ids.iter().enumerate().map(|(slot, id)| encode(&world.observe(slot, id))).collect();
         let sent = Instant::now();
@@ -226,6 +228,15 @@ impl LoopbackFleet {
         }
         Ok(sent)
     }
+}
+
+/// When the fleet clock's next period starts, plus 5 ms: a loop that publishes a
+/// tick's frames every [`spwi_proto::TICK_PERIOD`] from then stamps each with its own
+/// tick ([`LoopbackFleet::publish`]), never two with one.
+pub fn next_tick_instant() -> Instant {
+    let clock = spwi_agent::clock::FleetClock::default();
+    let at = spwi_proto::tick_start(spwi_proto::tick_at(clock.now()) + 1) + Duration::from_millis(5);
+    Instant::now() + clock.until(at)
 }
 
 /// A layout with at least `n` robot slots: the file's slots, repeated with a small shift.

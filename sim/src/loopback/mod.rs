@@ -23,7 +23,7 @@ mod routers;
 
 pub use agent_process::{AgentProcess, Launch};
 pub use decisions::{percentile, Decided, Decisions};
-pub use fleet::{layout_with_slots, usage, FleetOptions, LoopbackFleet, Usage};
+pub use fleet::{layout_with_slots, next_tick_instant, usage, FleetOptions, LoopbackFleet, Usage};
 pub use hub::{secured_peer, Hub};
 pub use in_process::InProcessAgent;
 pub use routers::Routers;
