@@ -594,7 +594,7 @@ impl Engine {
         out.push(Output::Embedding(EmbeddingMsg {
             robot: self.cfg.robot.clone(),
             instance: self.cfg.instance,
-            tick: tick,
+            tick,
             embedding: shared,
             visibility,
             vote: vote.clone(),

@@ -72,6 +72,11 @@ pub enum GcnNodes {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ModelSpec {
     pub file: String,
+    /// The file's SHA-256 (hex): a file changed on disk, even one that still parses
+    /// and fits the interface, is refused at start. Absent only where no manifest
+    /// names the file (a lone GCN given on the command line).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sha256: Option<String>,
     pub inputs: Vec<TensorSpec>,
     pub outputs: Vec<TensorSpec>,
     /// Softmax temperature fitted on the validation split (GRUs only).
@@ -87,6 +92,7 @@ impl ModelSpec {
         let (f, n) = (Dim::Fixed(features.dim()), nodes);
         ModelSpec {
             file: "gcn.onnx".into(),
+            sha256: None,
             inputs: vec![t("x", vec![Dim::Fixed(1), n.clone(), f]), t("adj", vec![Dim::Fixed(1), n.clone(), n])],
             outputs: vec![t("embedding", Dim::fixed(&[1, EMBEDDING_DIM])), t("logits", Dim::fixed(&[1, NUM_CLASSES]))],
             temperature: None,
@@ -232,6 +238,27 @@ pub enum ManifestError {
     Shape { file: PathBuf, tensor: String, expected: String, actual: String },
     #[error("{file}: has {actual} {side}s, the manifest lists {expected}")]
     Count { file: PathBuf, side: &'static str, expected: usize, actual: usize },
+    #[error("{file}: its SHA-256 is {actual}, the manifest names {expected}: the file was changed after the set was made; refusing it")]
+    Digest { file: PathBuf, expected: String, actual: String },
+    #[error("{file}: the manifest names no sha256 for it (every model file's digest is checked at start; models/train/export.py writes it)")]
+    NoDigest { file: PathBuf },
+}
+
+/// The SHA-256 of `file`, in lower-case hex.
+pub fn sha256_hex(file: &Path) -> std::io::Result<String> {
+    let bytes = std::fs::read(file)?;
+    let d = ring::digest::digest(&ring::digest::SHA256, &bytes);
+    Ok(d.as_ref().iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// Refuses `file` unless its SHA-256 is the one `spec` names.
+fn check_digest(file: &Path, spec: &ModelSpec) -> Result<(), ManifestError> {
+    let expected = spec.sha256.clone().ok_or_else(|| ManifestError::NoDigest { file: file.to_owned() })?;
+    let actual = sha256_hex(file).map_err(|e| ManifestError::Onnx { file: file.to_owned(), reason: e.to_string() })?;
+    if !actual.eq_ignore_ascii_case(&expected) {
+        return Err(ManifestError::Digest { file: file.to_owned(), expected, actual });
+    }
+    Ok(())
 }
 
 impl Manifest {
@@ -245,6 +272,7 @@ impl Manifest {
         m.check_interface(&path)?;
         for (_, spec) in m.models.all() {
             check_onnx(&dir.join(&spec.file), spec)?;
+            check_digest(&dir.join(&spec.file), spec)?;
         }
         Ok(m)
     }
@@ -324,6 +352,7 @@ impl Manifest {
         };
         let inputs = |tensors: &[(&str, Vec<usize>)], steps: usize| ModelSpec {
             file: String::new(),
+            sha256: None,
             inputs: tensors
                 .iter()
                 .map(|(name, shape)| TensorSpec { name: (*name).into(), shape: Dim::fixed(shape) })

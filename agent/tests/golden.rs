@@ -209,6 +209,35 @@ fn a_wrong_model_file_is_refused() {
 }
 
 #[test]
+fn a_model_file_changed_after_the_set_was_made_is_refused_naming_it() {
+    let dir = fixture_copy("tampered");
+    // One weight changed: the file still parses and fits the interface.
+    let path = dir.join("ego_gru.onnx");
+    let mut bytes = std::fs::read(&path).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x40;
+    std::fs::write(&path, &bytes).unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
+    let spec = spwi_agent::manifest::Manifest::load(&shipped).unwrap().models.ego_gru;
+    spwi_agent::manifest::check_onnx(&path, &spec).expect("the tampered file still parses and fits");
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("ego_gru.onnx") && e.contains("SHA-256") && e.contains("changed"), "{e}");
+    // A manifest that names no digest is refused too.
+    std::fs::write(&path, &{
+        bytes[mid] ^= 0x40;
+        bytes
+    })
+    .unwrap();
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
+    m["models"]["gcn"].as_object_mut().unwrap().remove("sha256");
+    std::fs::write(dir.join("manifest.json"), m.to_string()).unwrap();
+    let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
+    assert!(e.contains("gcn.onnx") && e.contains("names no sha256"), "{e}");
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn a_set_without_a_manifest_is_refused_naming_the_file_and_the_cause_once() {
     let dir = fixture_copy("no-manifest");
     std::fs::remove_file(dir.join("manifest.json")).unwrap();

@@ -10,6 +10,8 @@ onnxruntime 1.31 and tract read it), except the GCN's node count (node_dim.py), 
   and onnxruntime's outputs go to reference.json, which the Rust golden tests replay
   through tract and ort.
 """
+import hashlib
+
 import numpy as np
 import onnx
 import onnxruntime as ort
@@ -58,12 +60,17 @@ def export(model, inputs, input_names, output_names, path, named_nodes=False):
 
 
 def io_spec(path):
+    """The manifest entry of the ONNX file at `path` (besides its name): its SHA-256,
+    which the daemon checks at start, and its inputs and outputs."""
     m = onnx.load(path)
+    with open(path, "rb") as f:
+        digest = hashlib.sha256(f.read()).hexdigest()
 
     def shape(vi):
         return [d.dim_param or d.dim_value for d in vi.type.tensor_type.shape.dim]
 
     return {
+        "sha256": digest,
         "inputs": [{"name": i.name, "shape": shape(i)} for i in m.graph.input],
         "outputs": [{"name": o.name, "shape": shape(o)} for o in m.graph.output],
     }

@@ -165,9 +165,8 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
 
 pub fn print(r: &BenchReport) {
     println!(
-        "{} robots{}{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
+        "{} robots at 10 Hz{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
         r.robots,
-        " at 10 Hz",
         if r.secured { ", secured" } else { "" },
         match r.routers {
             0 => String::new(),

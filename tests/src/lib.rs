@@ -49,9 +49,11 @@ pub fn models() -> Arc<ModelSet> {
 /// A frame for `robot` captured at the start of `tick`: the worker is seen unless
 /// `tick % 11 == robot_index`.
 pub fn scripted_frame(robot: &RobotId, index: usize, tick: u64) -> DetectionFrame {
-    let seed = tick as f32 * 0.21 + index as f32 * 1.7;
+    // Ticks of the wall clock are about 2e10: too large for an f32 to tell apart.
+    let phase = (tick % 100_000) as f32;
+    let seed = phase * 0.21 + index as f32 * 1.7;
     let feat = |k: f32| (0..FEATURE_DIM).map(|i| (i as f32 * 0.05 + k + seed).sin()).collect::<Vec<_>>();
-    let x = 100.0 + ((tick as f32 * 0.05 + index as f32).sin() + 1.0) * 200.0;
+    let x = 100.0 + ((phase * 0.05 + index as f32).sin() + 1.0) * 200.0;
     DetectionFrame {
         robot: robot.clone(),
         capture_us: DetectionFrame::capture_at_tick(tick),

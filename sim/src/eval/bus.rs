@@ -41,6 +41,8 @@ pub struct Bus {
     logs: Option<Vec<Log>>,
     /// Per engine: the station it lies about, if it lies ([`Bus::lie`]).
     lies: Vec<Option<Station>>,
+    /// Per engine: how far its clock runs ahead of the bus's (ms; negative: behind).
+    clock_offsets: Vec<i64>,
 }
 
 impl Bus {
@@ -58,6 +60,7 @@ impl Bus {
             rng,
             logs: record.then(|| vec![Vec::new(); n]),
             lies: vec![None; n],
+            clock_offsets: vec![0; n],
         };
         for me in 0..n {
             for other in (0..n).filter(|&o| o != me) {
@@ -82,6 +85,13 @@ impl Bus {
     /// own engine runs on unaware: the lie is in what the others receive.
     pub fn lie(&mut self, slot: usize, station: Option<Station>) {
         self.lies[slot] = station;
+    }
+
+    /// Engine `slot`'s clock runs `ms` ahead of everyone else's (negative: behind): it
+    /// is handed every input at the time its own clock reads, and its deadlines are
+    /// kept on that clock.
+    pub fn shift_clock(&mut self, slot: usize, ms: i64) {
+        self.clock_offsets[slot] = ms;
     }
 
     /// Queues `input` for engine `to` at time `at`.
@@ -116,16 +126,17 @@ impl Bus {
                 self.poll_at[to] = None;
             }
             let logged = self.logs.as_ref().map(|_| input.clone());
-            let outputs = self.engines[to].handle(input, at);
+            let off = self.clock_offsets[to];
+            let outputs = self.engines[to].handle(input, shifted(at, off));
             for o in &outputs {
                 on_output(to, at, o);
                 self.broadcast(to, at, o);
             }
             if let (Some(logs), Some(input)) = (self.logs.as_mut(), logged) {
-                logs[to].push((at, input, outputs));
+                logs[to].push((shifted(at, off), input, outputs));
             }
             if let Some(d) = self.engines[to].next_deadline() {
-                let d = d.max(at);
+                let d = shifted(d, -off).max(at);
                 if self.poll_at[to].is_none_or(|p| d < p) {
                     self.poll_at[to] = Some(d);
                     self.deliver(to, Input::Poll, d);
@@ -174,6 +185,16 @@ impl Bus {
     /// What each engine was given and said (when built with `record`).
     pub fn into_logs(self) -> Option<Vec<Log>> {
         self.logs
+    }
+}
+
+/// `at` moved by `ms` milliseconds (never before 0).
+fn shifted(at: Duration, ms: i64) -> Duration {
+    let by = Duration::from_millis(ms.unsigned_abs());
+    if ms >= 0 {
+        at + by
+    } else {
+        at.saturating_sub(by)
     }
 }
 

@@ -48,6 +48,13 @@ pub struct EvalArgs {
     /// at confidence 1, claiming the best view: members whose word is false.
     #[arg(long, default_value_t = 0)]
     pub liars: usize,
+    /// How far off one robot's floor pose is (metres; the slot after the liars).
+    #[arg(long, value_name = "METRES", default_value_t = 0.0)]
+    pub pose_error: f64,
+    /// How far one robot's clock (the highest slot) runs ahead of the others' (ms;
+    /// negative: behind).
+    #[arg(long, value_name = "MS", default_value_t = 0, allow_negative_numbers = true)]
+    pub clock_offset: i64,
     /// Seconds the fleet has already worked on the floor when an episode starts: its
     /// station maps are what its robots built watching another worker that long (0:
     /// every episode starts with empty maps, a fleet's first seconds on a new floor).
@@ -92,6 +99,8 @@ pub fn main(a: EvalArgs) -> Result<()> {
         faulty,
         looping,
         liars,
+        pose_error,
+        clock_offset,
         warm_map,
         delay,
         agent_config,
@@ -109,7 +118,13 @@ pub fn main(a: EvalArgs) -> Result<()> {
     if !(0.0..=10_000.0).contains(&delay) {
         anyhow::bail!("--delay {delay}: milliseconds, 0 to 10000");
     }
-    if dropouts >= robots || faulty + looping + liars >= robots {
+    if !(0.0..=100.0).contains(&pose_error) {
+        anyhow::bail!("--pose-error {pose_error}: metres, 0 to 100");
+    }
+    if clock_offset.unsigned_abs() > 400 {
+        anyhow::bail!("--clock-offset {clock_offset}: ms, within ±400 (the robots take ticks 5 back, 2 ahead)");
+    }
+    if dropouts >= robots || faulty + looping + liars + usize::from(pose_error > 0.0) >= robots {
         anyhow::bail!(
             "--dropouts {dropouts} / --faulty {faulty} + --looping {looping} + --liars {liars}: must leave at least one of the {robots} robots working"
         );
@@ -177,7 +192,16 @@ pub fn main(a: EvalArgs) -> Result<()> {
         episodes,
         seed,
         ticks,
-        faults: crate::eval::Faults { dropouts, loss, faulty, looping, liars, delay_ms: delay },
+        faults: crate::eval::Faults {
+            dropouts,
+            loss,
+            faulty,
+            looping,
+            liars,
+            pose_error_m: pose_error,
+            clock_offset_ms: clock_offset,
+            delay_ms: delay,
+        },
         tick,
         warm_map_ticks: warm_map * 10,
         cnn1d: true,

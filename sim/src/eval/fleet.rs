@@ -356,6 +356,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         .map(|_| Observers::new(&o.models, crate::calibration::of(&layout.camera), o.cnn1d))
         .collect::<Result<Vec<_>>>()?;
     let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
+    if o.faults.clock_offset_ms != 0 {
+        bus.shift_clock(n - 1, o.faults.clock_offset_ms);
+    }
     let mut stuck: Vec<StuckCamera> = (0..n).map(|_| StuckCamera::default()).collect();
     let mut looping: Vec<LoopingCamera> = (0..n).map(|_| LoopingCamera::default()).collect();
     let mut intents: Vec<Station> = Vec::with_capacity(ticks + horizon);
@@ -382,7 +385,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let tick = world.tick;
         let now = TICK * tick as u32;
         // Liars vote a station the worker is not heading to, every tick.
-        for slot in o.faults.lying()..o.faults.untrue() {
+        for slot in o.faults.liar_slots() {
             let wrong = Station::ALL[(world.worker.goal.index() + 1) % NUM_CLASSES];
             bus.lie(slot, Some(wrong));
         }
@@ -402,6 +405,13 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                 frame = stuck[slot].pass(frame);
             } else if slot < o.faults.lying() {
                 frame = looping[slot].pass(frame);
+            }
+            if o.faults.pose_error_slot() == Some(slot) {
+                // The localiser puts the camera pose_error_m off, always the same way.
+                if let Some(p) = frame.pose.as_mut() {
+                    let d = o.faults.pose_error_m as f32 * std::f32::consts::FRAC_1_SQRT_2;
+                    p.position = [p.position[0] + d, p.position[1] + d];
+                }
             }
             obs.see(&frame);
             bus.deliver(slot, Input::Frame(frame), now);
@@ -452,7 +462,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             p.collective = votes[slot].take().filter(|_| seen);
             per_robot.push((slot, p));
             // A liar's own decisions are not the team's to score.
-            if !(o.faults.lying()..o.faults.untrue()).contains(&slot) {
+            if !o.faults.liar_slots().contains(&slot) {
                 decisions.push(decided[slot].take().unwrap_or_default());
             }
         }

@@ -119,9 +119,10 @@ pub fn paper_protocol() -> TickConfig {
     TickConfig { relay_ms: 0, stale_after_frames: 0, consensus: ConsensusRule::Paper, ..TickConfig::default() }
 }
 
-/// The mean trust the faulty robots' votes carried / the others'.
+/// The mean trust the others held of the untrue robots (lying cameras, liars, a pose
+/// off) / of the rest.
 fn trust_split(r: &Report) -> String {
-    let lying = r.faults.lying();
+    let lying = r.faults.untrue();
     let mean = |ps: &[super::PerRobot]| {
         let ts: Vec<f64> = ps.iter().filter_map(|p| p.trust).collect();
         if ts.is_empty() {
