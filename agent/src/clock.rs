@@ -100,14 +100,16 @@ impl TickWindow {
 }
 
 /// How one source's ticks sit against our clock: the start of the tick it named less
-/// the moment we heard it, averaged over its latest messages (ms; negative: its ticks
-/// start before we hear them, as they should by a link's delay), and how many of its
-/// messages fell outside our window.
+/// the moment we heard it, averaged over its latest messages within our window (ms;
+/// negative: its ticks start before we hear them, as they should by a link's delay);
+/// how many of its messages fell outside the window, and by how much the latest did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct PeerClock {
     /// `None` until it is first heard within the window.
     pub offset_ms: Option<f32>,
     pub refused: u64,
+    /// The same offset for its latest message outside the window (ms).
+    pub last_refused_ms: Option<i64>,
 }
 
 impl PeerClock {
@@ -118,6 +120,12 @@ impl PeerClock {
     pub fn heard(&mut self, tick: u64, now: Duration) {
         let x = signed_ms(tick_start(tick), now) as f32;
         self.offset_ms = Some(self.offset_ms.map_or(x, |m| m + Self::RATE * (x - m)));
+    }
+
+    /// A message of tick `tick` heard at `now`, outside our window.
+    pub fn heard_off_window(&mut self, tick: u64, now: Duration) {
+        self.refused += 1;
+        self.last_refused_ms = Some(signed_ms(tick_start(tick), now));
     }
 }
 

@@ -17,13 +17,14 @@
 //! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map` | a published message |
 //! | `/spwi/state` | after each decision, whom the robot trusts and whose feed it sets aside ([`PeerState`], JSON) |
 //!
-//! Log and publish times are nanoseconds of engine time (since the daemon started).
+//! Log and publish times are nanoseconds of engine time: the fleet's clock, time since
+//! the Unix epoch.
 
 use crate::engine::{Engine, EngineConfig, Input, Output};
 use crate::model::ModelSet;
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
-use spwi_proto::{decode, encode, RobotId};
+use spwi_proto::{decode, encode, RobotId, PROTOCOL_VERSION};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -36,6 +37,10 @@ const BINCODE: &str = "spwi-bincode-v1";
 /// What `/spwi/config` holds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RecordedConfig {
+    /// The wire protocol the run spoke ([`spwi_proto::PROTOCOL_VERSION`]): a recording
+    /// of another protocol is refused rather than misread (absent before protocol 9).
+    #[serde(default)]
+    pub protocol: u16,
     pub engine: EngineConfig,
     pub model_set: String,
 }
@@ -240,7 +245,20 @@ pub fn read(path: &Path) -> Result<Recording> {
         let ctx = || format!("{}: record {} on {}", path.display(), m.sequence, m.channel.topic);
         let d = &m.data[..];
         match Channel::of_topic(&m.channel.topic) {
-            Some(Channel::Config) => config = Some(serde_json::from_slice(d).with_context(ctx)?),
+            Some(Channel::Config) => {
+                let raw: serde_json::Value = serde_json::from_slice(d).with_context(ctx)?;
+                let protocol = raw.get("protocol").and_then(serde_json::Value::as_u64).unwrap_or(0);
+                if protocol != u64::from(PROTOCOL_VERSION) {
+                    bail!(
+                        "{}: recorded by a build speaking protocol {}, this one speaks {PROTOCOL_VERSION} (ticks \
+                         of the fleet's clock, trust observed by the receiver): it cannot replay as it ran; \
+                         replay it with the build that made it, or record again",
+                        path.display(),
+                        if protocol == 0 { "8 or older".to_owned() } else { protocol.to_string() }
+                    );
+                }
+                config = Some(serde_json::from_value(raw).with_context(ctx)?)
+            }
             Some(Channel::InDetections) => inputs.push((now, Input::Frame(decode(d).with_context(ctx)?))),
             Some(Channel::InEmbedding) => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
             Some(Channel::InBallots) => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
@@ -281,4 +299,28 @@ pub fn replay(recording: &Recording, models: &Arc<ModelSet>) -> Result<Replayed>
         outputs.extend(out);
     }
     Ok(Replayed { outputs, states })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::TickConfig;
+    use crate::manifest::Manifest;
+
+    #[test]
+    fn a_recording_of_another_protocol_is_refused_saying_so() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
+        let manifest = Manifest::load(&dir).unwrap();
+        let engine =
+            EngineConfig::new(RobotId::new("r1").unwrap(), 1, &TickConfig::default(), &Default::default(), &manifest);
+        let path = std::env::temp_dir().join(format!("spwi-old-recording-{}.mcap", std::process::id()));
+        let old = RecordedConfig { protocol: 0, engine, model_set: manifest.name.clone() };
+        Recorder::create(&path, &old).unwrap().finish().unwrap();
+        let e = format!("{:#}", read(&path).unwrap_err());
+        assert!(e.contains("protocol 8 or older") && e.contains(&format!("speaks {PROTOCOL_VERSION}")), "{e}");
+        let now = RecordedConfig { protocol: PROTOCOL_VERSION, ..old };
+        Recorder::create(&path, &now).unwrap().finish().unwrap();
+        assert_eq!(read(&path).unwrap().config, now);
+        std::fs::remove_file(path).unwrap();
+    }
 }

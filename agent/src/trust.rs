@@ -3,9 +3,9 @@
 //! Two records per robot, each a moving average over about `window` judgements, both
 //! learned from the ballots of each decided tick and nothing else:
 //! - **votes**: every voter is judged, step by step, against the *other* voters of
-//!   the tick: where most of their trust (more than half) names one class, its vote
-//!   agrees or not; where their trust is split, the step tells nothing and is not
-//!   judged. Trust, not confidence, weighs the others here: a voter sure of itself
+//!   the tick: where most of their trust (more than half) names one class and that
+//!   trust outweighs the voter's own, its vote agrees or not; where their trust is
+//!   split, or less than its own, the step tells nothing and is not judged. Trust, not confidence, weighs the others here: a voter sure of itself
 //!   cannot make the honest look wrong — two honest voters and one confident liar
 //!   judge the liar wrong (both others name another class) and neither honest voter
 //!   (its others are split), so only the liar loses trust;
@@ -17,8 +17,10 @@
 //!
 //! Trust is the product of the two, never below `floor`, so a robot that was wrong for
 //! a while still counts a little and, being judged all the while, earns its trust back
-//! once its camera recovers. A robot starts trusted, and a record outlives a robot's
-//! leaving: one that comes back is still known.
+//! once its camera recovers. A judgement that lowers a record moves it twice as far as
+//! one that raises it: trust is lost faster than it is earned. A robot starts at
+//! [`UNJUDGED`], counted but outweighed by any robot the team has seen agree, and a
+//! record outlives a robot's leaving: one that comes back is still known.
 //!
 //! What a ballot weighs is the trust its *receiver* learned of the voter
 //! ([`TrustBook::weight`]), never anything the voter says of itself. The team's
@@ -60,6 +62,12 @@ impl Default for TrustConfig {
 /// Levels a ballot's weight is rounded to (in (0, 1]).
 pub const WEIGHT_STEPS: f32 = 16.0;
 
+/// What a voter's record of votes starts at, before anyone has judged it: enough to
+/// be counted, half of what a voter that keeps agreeing earns. A member that has just
+/// joined — or just begun to lie — has no say over one the team has seen agree, and
+/// its first judged disagreement sets it aside.
+pub const UNJUDGED: f32 = 0.5;
+
 /// Moving averages of one robot's agreement with the others.
 #[derive(Debug, Clone, Copy)]
 struct Record {
@@ -69,7 +77,7 @@ struct Record {
 
 impl Default for Record {
     fn default() -> Self {
-        Record { votes: 1.0, track: 1.0 }
+        Record { votes: UNJUDGED, track: 1.0 }
     }
 }
 
@@ -85,9 +93,10 @@ impl TrustBook {
         TrustBook { cfg, records: BTreeMap::new() }
     }
 
-    /// The trust of `robot`: 1 until it has been judged.
+    /// The trust of `robot`: [`UNJUDGED`] until it has been judged.
     pub fn of(&self, robot: &RobotId) -> f32 {
-        self.records.get(robot).map_or(1.0, |r| (r.votes * r.track).max(self.cfg.floor))
+        let r = self.records.get(robot).copied().unwrap_or_default();
+        (r.votes * r.track).max(self.cfg.floor)
     }
 
     /// A peer we fuse the embeddings and worker estimates of.
@@ -101,18 +110,34 @@ impl TrustBook {
         ((self.of(robot) * WEIGHT_STEPS).round() / WEIGHT_STEPS).max(1.0 / WEIGHT_STEPS)
     }
 
-    /// A voter whose ballot is counted while a trusted voter's is.
-    pub fn counts(&self, robot: &RobotId) -> bool {
-        self.of(robot) >= self.cfg.count_above
+    /// A voter the team has seen agree more than disagree: trusted above
+    /// [`UNJUDGED`] (by its rounded weight). Only such a voter decides a tick alone
+    /// while other members are live: a newcomer — or a member that turned liar before
+    /// anyone saw it agree — has no such say.
+    pub fn established(&self, robot: &RobotId) -> bool {
+        self.weight(robot) > UNJUDGED
     }
 
-    /// Every robot judged so far and its trust.
+    /// A voter whose ballot is counted while a trusted voter's is: its rounded
+    /// [`TrustBook::weight`] is at least `count_above`, so that robots whose records
+    /// differ by a hair (a tick counted differently) still count the same voters.
+    pub fn counts(&self, robot: &RobotId) -> bool {
+        self.weight(robot) >= self.cfg.count_above
+    }
+
+    /// Every robot that voted or was judged so far, and its trust.
     pub fn all(&self) -> BTreeMap<RobotId, f32> {
         self.records.keys().map(|r| (r.clone(), self.of(r))).collect()
     }
 
-    fn rate(&self) -> f32 {
-        1.0 / self.cfg.window.max(1) as f32
+    /// Moves a record towards the judgement `x`: by 1/window of the way when it
+    /// raises it, twice that when it lowers it — trust is lost faster than it is
+    /// earned, so a member that turns on the team loses its weight within seconds
+    /// while a robot that keeps agreeing stays near 1.
+    fn judged(window: u32, record: &mut f32, x: f32) {
+        let rate = 1.0 / window.max(1) as f32;
+        let rate = if x < *record { (2.0 * rate).min(1.0) } else { rate };
+        *record += rate * (x - *record);
     }
 
     /// The record of `robot`, started on first use (no id copied once it exists).
@@ -126,9 +151,8 @@ impl TrustBook {
     /// Judges one robot's estimate of the worker for a tick: `agrees` when it put the
     /// worker where most of the others did.
     pub fn learn_track(&mut self, robot: &RobotId, agrees: bool) {
-        let rate = self.rate();
-        let r = self.record(robot);
-        r.track += rate * (f32::from(u8::from(agrees)) - r.track);
+        let window = self.cfg.window;
+        Self::judged(window, &mut self.record(robot).track, f32::from(u8::from(agrees)));
     }
 
     /// Judges the worker estimates of a decided tick's ballots against each other, when
@@ -146,21 +170,23 @@ impl TrustBook {
     /// alike, each weighing its `trust`). `ballots` sorted by robot, as
     /// [`crate::consensus::decide`] leaves them.
     pub fn learn(&mut self, ballots: &[Ballot<'_>]) {
-        let rate = self.rate();
+        let window = self.cfg.window;
         for (b, (agreed, judged)) in ballots.iter().zip(judge(ballots)) {
-            if judged == 0 {
-                continue;
+            let record = self.record(b.robot); // every voter is known from its first ballot
+            if judged > 0 {
+                Self::judged(window, &mut record.votes, agreed as f32 / judged as f32);
             }
-            let x = agreed as f32 / judged as f32;
-            let r = self.record(b.robot);
-            r.votes += rate * (x - r.votes);
         }
     }
 }
 
 /// Per ballot: (its steps whose class most of the others' trust names, its steps on
-/// which most of the others' trust names one class). Sums run in ballot order, so the
-/// result is the same on every robot.
+/// which most of the others' trust names one class *and* that trust outweighs the
+/// judged voter's own). So two voters that disagree judge each other only when one has
+/// earned more trust than the other: a newcomer (or a member that turned liar) is
+/// judged by a robot the team has seen agree, never the other way round, and two
+/// strangers judge neither. Sums run in ballot order, so the result is the same on
+/// every robot.
 pub fn judge(ballots: &[Ballot<'_>]) -> Vec<(usize, usize)> {
     ballots
         .iter()
@@ -175,7 +201,7 @@ pub fn judge(ballots: &[Ballot<'_>]) -> Vec<(usize, usize)> {
                 }
                 let total: f32 = score.iter().sum();
                 let k = argmax(&score);
-                if total > 0.0 && score[k] > 0.5 * total {
+                if score[k] > 0.5 * total && score[k] > b.trust.max(0.0) {
                     tally.1 += 1;
                     tally.0 += usize::from(s.class.index() == k);
                 }
@@ -212,33 +238,35 @@ mod tests {
         let cfg = TrustConfig { window: 10, floor: 0.1, fuse_above: 0.5, count_above: 0.5 };
         let mut book = TrustBook::new(cfg);
         let ids = [id("a"), id("b"), id("c")];
-        assert_eq!(book.of(&ids[2]), 1.0, "trusted until judged");
-        for _ in 0..5 {
-            tick(&mut book, &ids, &[Workstation, Workstation, Manufacturing]);
-        }
-        let after5 = book.of(&ids[2]);
-        assert!((after5 - 0.9f32.powi(5)).abs() < 1e-5, "{after5}"); // (1 − 1/10)^5
-        assert!(book.fuses(&ids[2]), "0.59: still fused");
+        assert_eq!(book.of(&ids[2]), UNJUDGED, "half trusted until judged");
+        assert!(book.counts(&ids[2]) && book.fuses(&ids[2]));
+        tick(&mut book, &ids, &[Workstation, Workstation, Manufacturing]);
+        // judged by a and b together (their trust outweighs its own): lowered by 2/10
+        assert!((book.of(&ids[2]) - 0.4).abs() < 1e-6, "{}", book.of(&ids[2]));
+        assert!(!book.fuses(&ids[2]) && !book.counts(&ids[2]), "0.4, weighing 6/16: set aside");
         for _ in 0..60 {
             tick(&mut book, &ids, &[Workstation, Workstation, Manufacturing]);
         }
         assert_eq!(book.of(&ids[2]), 0.1, "floored");
-        assert!(!book.fuses(&ids[2]));
-        assert_eq!(book.of(&ids[0]), 1.0, "the two that agree keep their trust");
+        // a and b are never judged: for each, the other alone does not outweigh it
+        assert_eq!((book.of(&ids[0]), book.of(&ids[1])), (UNJUDGED, UNJUDGED));
         for _ in 0..30 {
             tick(&mut book, &ids, &[Workstation, Workstation, Workstation]);
         }
         assert!(book.of(&ids[2]) > 0.9, "recovered: {}", book.of(&ids[2]));
+        assert!(book.of(&ids[0]) > 0.9, "now judged agreeing: {}", book.of(&ids[0]));
         assert_eq!(book.all().len(), 3);
     }
 
     #[test]
-    fn a_lone_voter_is_not_judged_and_agreement_counts_step_by_step() {
+    fn a_lone_voter_or_a_pair_is_not_judged_and_agreement_counts_step_by_step() {
         let mut book = TrustBook::new(TrustConfig { window: 1, ..TrustConfig::default() });
-        let ids = [id("a"), id("b")];
+        let ids = [id("a"), id("b"), id("c")];
         tick(&mut book, &ids[..1], &[Assembly]);
-        assert!(book.all().is_empty());
-        // two voters, each judged against the other: a says 2 at every step, b 2, 3, 3
+        tick(&mut book, &ids[..2], &[Assembly, Manufacturing]);
+        assert!(book.all().values().all(|&t| t == UNJUDGED), "of two that disagree, neither can tell who is wrong");
+        assert_eq!(book.all().len(), 2, "both are known as voters");
+        // a says 2 at every step, b and c 2, 3, 3
         let (sa, sb) = (vec![StepVote { class: Assembly, confidence: 0.8 }; 3], {
             let mut s = vec![StepVote { class: Manufacturing, confidence: 0.8 }; 3];
             s[0].class = Assembly;
@@ -247,10 +275,12 @@ mod tests {
         let ballots = [
             Ballot { robot: &ids[0], visibility: 1, trust: 1.0, quality: 1.0, steps: &sa },
             Ballot { robot: &ids[1], visibility: 1, trust: 1.0, quality: 1.0, steps: &sb },
+            Ballot { robot: &ids[2], visibility: 1, trust: 1.0, quality: 1.0, steps: &sb },
         ];
         book.learn(&ballots);
+        // a: agrees at t, not at t+1 and t+2; b: agrees at t, split (a against c) after
         assert!((book.of(&ids[0]) - 1.0 / 3.0).abs() < 1e-6);
-        assert!((book.of(&ids[1]) - 1.0 / 3.0).abs() < 1e-6);
+        assert_eq!(book.of(&ids[1]), 1.0);
     }
 
     #[test]
@@ -272,24 +302,26 @@ mod tests {
                 .collect();
             book.learn(&ballots);
         }
-        assert_eq!((book.of(&ids[0]), book.of(&ids[1])), (1.0, 1.0));
-        assert!((book.of(&ids[2]) - 0.99f32.powi(100)).abs() < 1e-4, "{}", book.of(&ids[2]));
+        // b and c judge d (together they outweigh it); neither is judged (of its
+        // others, one agrees and one, d, disagrees: split) — they keep what they had
+        assert_eq!((book.of(&ids[0]), book.of(&ids[1])), (UNJUDGED, UNJUDGED));
+        assert_eq!(book.of(&ids[2]), 0.1, "0.5 × 0.98^100 = 0.07, floored");
         assert!(!book.counts(&ids[2]) && book.counts(&ids[0]));
-        assert_eq!(book.weight(&ids[2]), 0.375, "0.366 rounded to sixteenths");
+        assert_eq!(book.weight(&ids[2]), 0.125, "0.1 rounded to sixteenths");
     }
 
     #[test]
     fn trust_is_the_product_of_the_vote_and_track_records() {
-        let mut book = TrustBook::new(TrustConfig { window: 2, floor: 0.1, fuse_above: 0.5, count_above: 0.5 });
+        let mut book = TrustBook::new(TrustConfig { window: 4, floor: 0.1, fuse_above: 0.5, count_above: 0.5 });
         let ids = [id("a"), id("b"), id("c")];
-        book.learn_track(&ids[0], false); // 1 → 0.5
-        assert_eq!(book.of(&ids[0]), 0.5);
-        tick(&mut book, &ids, &[Manufacturing, Workstation, Workstation]); // a's votes: 1 → 0.5
+        book.learn_track(&ids[0], false); // lowered by 2/4: 1 → 0.5; votes unjudged, 0.5
         assert_eq!(book.of(&ids[0]), 0.25);
-        book.learn_track(&ids[0], true); // 0.5 → 0.75
-        assert_eq!(book.of(&ids[0]), 0.375);
+        tick(&mut book, &ids, &[Manufacturing, Workstation, Workstation]); // a's votes: 0.5 → 0.25
+        assert_eq!(book.of(&ids[0]), 0.125);
+        book.learn_track(&ids[0], true); // raised by 1/4: 0.5 → 0.625
+        assert_eq!(book.of(&ids[0]), 0.15625);
         book.learn_track(&ids[1], true);
-        assert_eq!(book.of(&ids[1]), 1.0);
+        assert_eq!(book.of(&ids[1]), UNJUDGED, "its track 1, its votes not judged yet");
         for _ in 0..10 {
             book.learn_track(&ids[2], false);
         }

@@ -80,9 +80,10 @@ pub async fn run(
     let m = &models.manifest;
     let engine_config = EngineConfig::new(robot.clone(), instance, &config.tick, &config.camera, m);
     let mut recorder = match &record {
-        Some(path) => {
-            Some(Recorder::create(path, &RecordedConfig { engine: engine_config.clone(), model_set: m.name.clone() })?)
-        }
+        Some(path) => Some(Recorder::create(
+            path,
+            &RecordedConfig { protocol: PROTOCOL_VERSION, engine: engine_config.clone(), model_set: m.name.clone() },
+        )?),
         None => None,
     };
     let mut engine = Engine::new(engine_config, models.inference(config.tick.temporal)?);

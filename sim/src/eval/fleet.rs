@@ -24,6 +24,8 @@ use std::time::Duration;
 
 /// The tick period, as the daemon lives it.
 const TICK: Duration = spwi_proto::TICK_PERIOD;
+/// Ticks into an episode after which `consensus_settled` scores (10 s).
+pub const SETTLED_TICKS: usize = 100;
 
 /// Tallies of one or more episodes.
 #[derive(Debug, Clone, Default)]
@@ -34,6 +36,9 @@ pub struct Tallies {
     /// The collective GRU of the robots whose camera works (every robot without faults).
     pub healthy_collective: Tally,
     pub consensus: Tally,
+    /// The same from [`SETTLED_TICKS`] into the episode on: what a fault that starts
+    /// with the episode costs once the team has had 10 s to see it.
+    pub consensus_settled: Tally,
     /// The team decision on every tick, a tick without one (nobody saw the worker)
     /// counting as wrong: what the fleet as a whole gets right.
     pub team_all_ticks: Tally,
@@ -80,6 +85,7 @@ impl Tallies {
             (&mut self.collective, &o.collective),
             (&mut self.healthy_collective, &o.healthy_collective),
             (&mut self.consensus, &o.consensus),
+            (&mut self.consensus_settled, &o.consensus_settled),
             (&mut self.team_all_ticks, &o.team_all_ticks),
             (&mut self.cvm, &o.cvm),
             (&mut self.cvm_mapped, &o.cvm_mapped),
@@ -438,7 +444,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         for slot in (0..n).filter(|&s| votes[s].is_some()) {
             let held: Vec<f64> = (0..n)
                 .filter(|&j| j != slot && bus.is_live(j))
-                .map(|j| f64::from(bus.engine(j).trust().get(&ids[slot]).copied().unwrap_or(1.0)))
+                .map(|j| {
+                    f64::from(bus.engine(j).trust().get(&ids[slot]).copied().unwrap_or(spwi_agent::trust::UNJUDGED))
+                })
                 .collect();
             if !held.is_empty() {
                 tallies.vote_trust[slot].0 += held.iter().sum::<f64>() / held.len() as f64;
@@ -552,6 +560,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             tallies.agreed_ticks += u64::from(all_same);
             for d in decided {
                 tallies.consensus.add(d, truth);
+                if t >= SETTLED_TICKS {
+                    tallies.consensus_settled.add(d, truth);
+                }
                 if close {
                     tallies.close_pair.consensus.add(d, truth);
                 }

@@ -295,6 +295,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     models.insert("collective", of(&|e| &e.collective));
     models.insert("healthy_collective", of(&|e| &e.healthy_collective));
     models.insert("consensus", of(&|e| &e.consensus));
+    models.insert("consensus_settled", of(&|e| &e.consensus_settled));
     models.insert("team_all_ticks", of(&|e| &e.team_all_ticks));
     models.insert("cvm", of(&|e| &e.cvm));
     models.insert("cvm_mapped", of(&|e| &e.cvm_mapped));
@@ -475,6 +476,7 @@ pub fn print(r: &Report) {
         "ego",
         "collective",
         "consensus",
+        "consensus_settled",
         "cvm",
         "cvm_mapped",
         "cnn1d",

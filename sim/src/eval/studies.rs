@@ -223,6 +223,8 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
         Faults { loss: 0.3, ..Faults::none() },
         Faults { faulty: 1, ..Faults::none() },
         Faults { looping: 1, ..Faults::none() },
+        Faults { liars: 1, ..Faults::none() },
+        Faults { pose_error_m: 2.0, ..Faults::none() },
     ] {
         // The paper's protocol (no relays, no check for frozen feeds, the paper's rule)
         // beside ours with each consensus rule.
@@ -525,6 +527,10 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             format!("{} stuck camera (confident, wrong)", f.faulty)
         } else if f.looping > 0 {
             format!("{} camera looping an old 5 s clip", f.looping)
+        } else if f.liars > 0 {
+            format!("{} member voting a wrong station every tick, sure of it", f.liars)
+        } else if f.pose_error_m > 0.0 {
+            format!("1 robot's pose {} m off", f.pose_error_m)
         } else {
             "none".into()
         };
