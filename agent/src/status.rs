@@ -185,3 +185,29 @@ impl Status {
         exposition(&r)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_without_decisions_for_too_long_are_unhealthy_and_no_frames_are_not() {
+        let after = Duration::from_secs(3);
+        let mut h = Health::new(after);
+        let t0 = h.started;
+        let at = |s: f64| t0 + Duration::from_secs_f64(s);
+        assert_eq!(h.check(at(10.0)), None, "no frames yet: maybe no camera, not a fault of ours");
+        h.frame(at(1.0));
+        assert_eq!(h.check(at(2.0)), None, "not running long enough to tell");
+        h.frame(at(3.9));
+        let p = h.check(at(4.0)).expect("frames, and no decision in 4 s");
+        assert!(p.contains("no tick was ever decided") && p.contains("http.unhealthy_after_ms = 3000"), "{p}");
+        h.decision(at(4.5));
+        h.frame(at(4.6));
+        assert_eq!(h.check(at(5.0)), None);
+        h.frame(at(8.0));
+        let p = h.check(at(8.0)).expect("3.5 s since the last decision");
+        assert!(p.contains("no tick was decided for 3.5 s"), "{p}");
+        assert_eq!(h.check(at(20.0)), None, "frames stopped too: nothing to decide");
+    }
+}

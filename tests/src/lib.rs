@@ -151,3 +151,82 @@ pub fn agent_process_with(command: Command, hub: &Hub, robot: &RobotId, listen: 
     let launch = Launch { listen: listen.into(), models: Some(models_dir()), ..Launch::new(hub, robot) };
     AgentProcess::spawn(command, launch).expect("spawn spwi-test-agent")
 }
+
+/// `robot`'s share of `tick`, voting storage at confidence 1 and claiming a thousand
+/// detections.
+pub fn lying_share(robot: &RobotId, tick: u64) -> EmbeddingMsg {
+    let vote = VoteMsg {
+        robot: robot.clone(),
+        instance: 99,
+        tick,
+        steps: vec![StepVote { class: Station::Storage, confidence: 1.0 }],
+        visibility: 1000,
+        quality: 1.0,
+        worker: None,
+        signature: Vec::new(),
+    };
+    EmbeddingMsg {
+        robot: robot.clone(),
+        instance: 99,
+        tick,
+        embedding: None,
+        visibility: 1000,
+        vote: Some(vote),
+        worker: None,
+        facing: None,
+        landmarks: Vec::new(),
+        verdict: None,
+    }
+}
+
+/// `robot` (a member, on its own key) puts a thousand shares in 4 s: for ticks near
+/// 2^62, a minute ahead, a minute behind, tick 0 — and, between them, shares of the
+/// tick just ahead of the clock's, repeated. Returns how many were off the clock.
+pub async fn flood_off_clock(session: &zenoh::Session, fleet: &FleetId, robot: &RobotId) -> u64 {
+    let key = keys::robot_topic(fleet, robot, Topic::Embedding);
+    let mut off_clock = 0;
+    for k in 0..1000u64 {
+        let now = clock_tick();
+        let t = match k % 5 {
+            0 => (1 << 62) + k,
+            1 => now + 600,
+            2 => now - 600,
+            3 => 0,
+            _ => now + 1, // within the window: repeated, one share per tick counts
+        };
+        off_clock += u64::from(k % 5 != 4);
+        let bytes = encode(&lying_share(robot, t));
+        session.put(&key, bytes).congestion_control(zenoh::qos::CongestionControl::Block).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(4)).await;
+    }
+    off_clock
+}
+
+/// After [`flood_off_clock`] by `flooder` from tick `from` to `to`: every robot of
+/// `agents` decided every tick but at most one in a row, refused and counted every one
+/// of the `off_clock` messages, shows the flooder's refusals in `/status` and is healthy.
+pub fn flood_changed_nothing(
+    agents: &[InProcessAgent],
+    decisions: &Decisions,
+    flooder: &RobotId,
+    off_clock: u64,
+    from: u64,
+    to: u64,
+) {
+    use spwi_agent::clock::OffClock;
+    for a in agents {
+        let gap = decisions.longest_gap(&a.robot, from, to);
+        assert!(gap <= 1, "{} left {gap} ticks in a row undecided during the flood", a.robot);
+        let s = a.started.status.lock().unwrap().clone();
+        let refused: u64 =
+            [OffClock::MessageTooNew, OffClock::MessageTooOld].iter().filter_map(|w| s.metrics.off_clock.get(w)).sum();
+        eprintln!(
+            "{}: {refused} of {off_clock} refused off the clock; the flooder's clock {:?}",
+            a.robot,
+            s.clocks.get(flooder)
+        );
+        assert_eq!(refused, off_clock, "{}: every message off our clock refused and counted", a.robot);
+        assert!(s.clocks[flooder].refused >= off_clock, "/status shows the flooder's messages off our clock");
+        assert!(s.health.problem.is_none(), "{:?}", s.health);
+    }
+}

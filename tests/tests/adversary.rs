@@ -6,7 +6,7 @@
 //! the fullest view, stops counting once the others have seen it disagree; a vote
 //! signed in an earlier run of the fleet is never counted after a restart, neither at
 //! its own tick nor carried to the current one; a member flooding ticks far off the
-//! clock, in a secured fleet too, stops nothing.
+//! clock in a secured fleet stops nothing (tests/tests/clock.rs: in an open one).
 //! Run: `cargo test -p spwi-tests --test adversary -- --nocapture` to see the figures.
 
 use spwi_agent::config::AgentConfig;
@@ -240,6 +240,33 @@ async fn a_vote_signed_in_an_earlier_run_is_never_counted() {
             eprintln!("{}: {off} refused off the clock, {forged} forged relayed votes", a.robot);
             assert!(off >= 25 && forged >= 25, "{}: {off} off the clock, {forged} forged", a.robot);
         }
+        drop(publisher);
+        for a in agents {
+            a.stop().await.unwrap();
+        }
+    });
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_member_flooding_ticks_off_the_clock_in_a_secured_fleet_stops_nothing() {
+    let _serial = serial().await;
+    within!(60, "test", async {
+        let fleet = Fleet::make("flood");
+        let hub = Hub::start_secured(&fleet.dir.root, "world").await.unwrap();
+        let models = models();
+        let collector = hub.decisions().await.unwrap();
+        let honest = vec![id("r1"), id("r2"), id("r3")];
+        let mut agents = Vec::new();
+        for r in &honest {
+            agents.push(InProcessAgent::start(&hub, r, &models, AgentConfig::default()).await.unwrap());
+        }
+        let (session, _token) = member_session(&fleet, &hub, "r4").await;
+        let publisher = Publisher::start(&hub, honest.clone(), TICK);
+        collector.wait_members(&honest, 4, Instant::now(), Duration::from_secs(20)).await.unwrap();
+        let tick0 = publisher.current_tick();
+        let off_clock = flood_off_clock(&session, &hub.fleet, &id("r4")).await;
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        flood_changed_nothing(&agents, &collector, &id("r4"), off_clock, tick0 + 1, publisher.current_tick() - 1);
         drop(publisher);
         for a in agents {
             a.stop().await.unwrap();

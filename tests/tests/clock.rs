@@ -4,44 +4,16 @@
 //! link before it is buffered.
 //! Run: `cargo test -p spwi-tests --test clock -- --nocapture` to see the figures.
 
-use spwi_agent::clock::OffClock;
 use spwi_agent::config::AgentConfig;
 use spwi_proto::keys::{self, Topic};
-use spwi_proto::*;
 use spwi_sim::service::{self, WorldOptions};
 use spwi_tests::*;
 use spwi_world::layout::Layout;
 use spwi_world::world::Scenario;
 use std::time::{Duration, Instant};
-use zenoh::qos::CongestionControl;
 
 const EXE: &str = env!("CARGO_BIN_EXE_spwi-test-agent");
 const TICK: Duration = Duration::from_millis(100);
-
-/// A share of tick `tick` from `robot`, voting storage at confidence 1.
-fn share(robot: &RobotId, tick: u64) -> EmbeddingMsg {
-    EmbeddingMsg {
-        robot: robot.clone(),
-        instance: 99,
-        tick,
-        embedding: None,
-        visibility: 1000,
-        vote: Some(VoteMsg {
-            robot: robot.clone(),
-            instance: 99,
-            tick,
-            steps: vec![StepVote { class: Station::Storage, confidence: 1.0 }],
-            visibility: 1000,
-            quality: 1.0,
-            worker: None,
-            signature: Vec::new(),
-        }),
-        worker: None,
-        facing: None,
-        landmarks: Vec::new(),
-        verdict: None,
-    }
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_member_flooding_ticks_off_our_clock_stops_nothing_and_every_message_is_counted() {
@@ -59,49 +31,12 @@ async fn a_member_flooding_ticks_off_our_clock_stops_nothing_and_every_message_i
         let z = id("z");
         let _token = hub.session.liveliness().declare_token(keys::alive(&hub.fleet, &z)).await.unwrap();
         let publisher = Publisher::start(&hub, ids.clone(), TICK);
-        let mut all = ids.clone();
-        all.push(z.clone());
         collector.wait_members(&ids, 4, Instant::now(), Duration::from_secs(15)).await.unwrap();
 
-        // A thousand messages in 4 s: ticks near 2^62, a minute ahead, a minute behind,
-        // tick 0 — and, between them, z's shares of the ticks just ahead of ours.
-        let key = keys::robot_topic(&hub.fleet, &z, Topic::Embedding);
-        let (tick0, mut off_clock_sent) = (publisher.current_tick(), 0u64);
-        for k in 0..1000u64 {
-            let now = clock_tick();
-            let t = match k % 5 {
-                0 => (1 << 62) + k,
-                1 => now + 600,
-                2 => now - 600,
-                3 => 0,
-                _ => now + 1, // within the window: repeated, one share per tick counts
-            };
-            off_clock_sent += u64::from(k % 5 != 4);
-            let bytes = encode(&share(&z, t));
-            hub.session.put(&key, bytes).congestion_control(CongestionControl::Block).await.unwrap();
-            tokio::time::sleep(Duration::from_millis(4)).await;
-        }
+        let tick0 = publisher.current_tick();
+        let off_clock = flood_off_clock(&hub.session, &hub.fleet, &z).await;
         tokio::time::sleep(Duration::from_secs(1)).await;
-        let tick1 = publisher.current_tick();
-        for r in &ids {
-            let gap = collector.longest_gap(r, tick0 + 1, tick1 - 1);
-            assert!(gap <= 1, "{r} left {gap} ticks in a row undecided during the flood");
-        }
-        for a in &agents {
-            let s = a.started.status.lock().unwrap().clone();
-            let refused: u64 = [OffClock::MessageTooNew, OffClock::MessageTooOld]
-                .iter()
-                .filter_map(|w| s.metrics.off_clock.get(w))
-                .sum();
-            eprintln!(
-                "{}: {refused} of {off_clock_sent} refused off the clock; z's clock {:?}",
-                a.robot,
-                s.clocks.get(&z)
-            );
-            assert_eq!(refused, off_clock_sent, "{}: every message off our clock refused and counted", a.robot);
-            assert!(s.clocks[&z].refused >= off_clock_sent, "/status shows z's messages off our clock");
-            assert!(s.health.problem.is_none(), "{:?}", s.health);
-        }
+        flood_changed_nothing(&agents, &collector, &z, off_clock, tick0 + 1, publisher.current_tick() - 1);
         drop(publisher);
         for a in agents {
             a.stop().await.unwrap();
@@ -206,7 +141,7 @@ async fn a_256_mb_message_is_refused_by_the_link_before_it_is_buffered() {
         let before = spwi_sim::loopback::usage(agent.pid()).unwrap();
         let huge = vec![7u8; 256 << 20];
         let key = keys::robot_topic(&hub.fleet, &id("z"), Topic::Embedding);
-        hub.session.put(&key, huge).congestion_control(CongestionControl::Block).await.unwrap();
+        hub.session.put(&key, huge).congestion_control(zenoh::qos::CongestionControl::Block).await.unwrap();
         tokio::time::sleep(Duration::from_secs(3)).await;
         let after = spwi_sim::loopback::usage(agent.pid()).unwrap();
         let grew = after.rss_mb - before.rss_mb;
