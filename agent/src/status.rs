@@ -1,5 +1,6 @@
 //! What `/status` reports: a snapshot the tick loop refreshes after each decision and
-//! membership change, so HTTP readers never touch the loop's state.
+//! membership change, and at least twice a second whatever peers send, so HTTP readers
+//! never touch the loop's state. `/healthz` reads its [`Health`].
 
 use crate::clock::PeerClock;
 use crate::engine::Engine;

@@ -5,10 +5,11 @@
 //! - **votes**: every voter is judged, step by step, against the *other* voters of
 //!   the tick: where most of their trust (more than half) names one class and that
 //!   trust outweighs the voter's own, its vote agrees or not; where their trust is
-//!   split, or less than its own, the step tells nothing and is not judged. Trust, not confidence, weighs the others here: a voter sure of itself
-//!   cannot make the honest look wrong — two honest voters and one confident liar
-//!   judge the liar wrong (both others name another class) and neither honest voter
-//!   (its others are split), so only the liar loses trust;
+//!   split, or less than its own, the step tells nothing and is not judged. Trust,
+//!   not confidence, weighs the others here: a voter sure of itself cannot make the
+//!   honest look wrong — two honest voters and one confident liar judge the liar wrong
+//!   (both others name another class) and neither honest voter (its others are
+//!   split), so only the liar loses trust;
 //! - **track**: when at least three ballots place the worker on the floor, each
 //!   estimate is judged against the others (`floor::agrees_with_most`): 1 when it
 //!   puts the worker where most of them do, else 0. A camera replaying old frames

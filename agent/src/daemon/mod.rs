@@ -4,7 +4,8 @@
 //! callbacks ([`connection`]); decoding, checks and counting happen in the loop, so a
 //! bad message costs one log line (rate-limited, [`log`]) and one counter. The loop
 //! also wakes at the engine's next deadline, so ticks are decided on time even when
-//! peers fall silent. What goes out is put on Zenoh by a thread of its own
+//! peers fall silent. Its clock is the fleet's ([`crate::clock::FleetClock`]): the
+//! host's wall clock, which chrony or PTP keeps in step with the other robots'. What goes out is put on Zenoh by a thread of its own
 //! ([`publishing`]), and `/status` is refreshed after each decision and membership
 //! change. The `spwi-agent` process gives its heap's free pages back every half minute
 //! ([`memory`]; once per process, not per daemon, as the heap is the process's).
@@ -91,6 +92,7 @@ pub async fn run(
     let mut conn = Connection::open(zenoh, &fleet, &robot, config.tick.event_queue).await?;
     let outbox = Outbox::start(&conn.session, &fleet, &robot).await?;
 
+    let mut health = Health::new(Duration::from_millis(config.http.unhealthy_after_ms));
     let status: SharedStatus = Arc::new(Mutex::new(Status {
         robot: robot.to_string(),
         fleet: fleet.to_string(),
@@ -111,7 +113,7 @@ pub async fn run(
         metrics: engine.metrics().clone(),
         transport: TransportCounters::default(),
         clocks: Default::default(),
-        health: Health::new(Duration::from_millis(config.http.unhealthy_after_ms)),
+        health: health.clone(),
     }));
     let mut http_task = None;
     let mut http_addr = None;
@@ -136,7 +138,6 @@ pub async fn run(
         );
     }
     let window = engine.config().window;
-    let mut health = Health::new(Duration::from_millis(config.http.unhealthy_after_ms));
     let mut next_refresh = Instant::now();
     let mut bad_log = RateLimitedLog::new(Duration::from_secs(5));
     let mut slow_log = RateLimitedLog::new(Duration::from_secs(5));
