@@ -197,7 +197,7 @@ async fn clients_of_a_router_that_dies_move_to_the_other_and_the_fleet_decides_o
         let tick0 = publisher.current_tick();
         let (agreed, common) = collector.agreement(&ids, tick0 - 15, tick0 - 1);
         assert!(
-            common >= 14 && agreed >= 0.99,
+            common >= 14 && agreed >= 0.93, // one tick in 15 (tests/tests/fleet.rs says why)
             "through routers: {common} of 15 ticks decided by all, {agreed} agreed"
         );
 
