@@ -968,12 +968,13 @@ impl Engine {
         // a trusted member (we at least) is live: the tick then goes without a class.
         let all: Vec<Ballot<'_>> = tick.votes.values().map(|v| Ballot::of(v, self.trust.weight(&v.robot))).collect();
         let trusted = |b: &&Ballot<'_>| self.trust.counts(b.robot);
-        let anyone_trusted = all.iter().any(|b| trusted(&b)) || self.members().iter().any(|r| self.trust.counts(r));
+        let members = || std::iter::once(&self.cfg.robot).chain(self.live.iter());
+        let anyone_trusted = all.iter().any(|b| trusted(&b)) || members().any(|r| self.trust.counts(r));
         let mut counted: Vec<Ballot<'_>> = all.iter().filter(|b| !anyone_trusted || trusted(b)).copied().collect();
         // Nor does a voter not yet established decide a tick alone while a member the
         // team has seen agree is live.
         if let [alone] = counted[..] {
-            let others_established = self.members().iter().any(|m| m != alone.robot && self.trust.established(m));
+            let others_established = members().any(|m| m != alone.robot && self.trust.established(m));
             if others_established && !self.trust.established(alone.robot) {
                 counted.clear();
             }

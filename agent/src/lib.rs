@@ -1,5 +1,6 @@
 //! spwi-agent: the daemon each robot runs to predict, with its peers, where a human
-//! worker is heading (paper sections II and III-E; `shared/DESIGN.md`).
+//! worker is heading (the paper's sections II and III-E: star graph, GCN, GRU, weighted
+//! consensus; the wire protocol is `spwi_proto`'s).
 //!
 //! ```text
 //!  detections ─► graph.rs ─► model/ (GCN) ─► embedding ──publish──► peers

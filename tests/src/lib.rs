@@ -152,14 +152,14 @@ pub fn agent_process_with(command: Command, hub: &Hub, robot: &RobotId, listen: 
     AgentProcess::spawn(command, launch).expect("spawn spwi-test-agent")
 }
 
-/// `robot`'s share of `tick`, voting storage at confidence 1 and claiming a thousand
-/// detections.
-pub fn lying_share(robot: &RobotId, tick: u64) -> EmbeddingMsg {
+/// `robot`'s share of `tick` voting `class` for t and 20 steps ahead at confidence 1,
+/// claiming the fullest view and a thousand detections.
+pub fn lying_share(robot: &RobotId, tick: u64, class: Station) -> EmbeddingMsg {
     let vote = VoteMsg {
         robot: robot.clone(),
-        instance: 99,
+        instance: 4,
         tick,
-        steps: vec![StepVote { class: Station::Storage, confidence: 1.0 }],
+        steps: vec![StepVote { class, confidence: 1.0 }; 21],
         visibility: 1000,
         quality: 1.0,
         worker: None,
@@ -167,7 +167,7 @@ pub fn lying_share(robot: &RobotId, tick: u64) -> EmbeddingMsg {
     };
     EmbeddingMsg {
         robot: robot.clone(),
-        instance: 99,
+        instance: 4,
         tick,
         embedding: None,
         visibility: 1000,
@@ -195,7 +195,7 @@ pub async fn flood_off_clock(session: &zenoh::Session, fleet: &FleetId, robot: &
             _ => now + 1, // within the window: repeated, one share per tick counts
         };
         off_clock += u64::from(k % 5 != 4);
-        let bytes = encode(&lying_share(robot, t));
+        let bytes = encode(&lying_share(robot, t, Station::Storage));
         session.put(&key, bytes).congestion_control(zenoh::qos::CongestionControl::Block).await.unwrap();
         tokio::time::sleep(Duration::from_millis(4)).await;
     }

@@ -64,33 +64,6 @@ async fn member_session(fleet: &Fleet, hub: &Hub, name: &str) -> (zenoh::Session
     (session, token)
 }
 
-/// `robot`'s share of `tick` voting `class` for t and 20 steps ahead at confidence 1,
-/// with the fullest view and a thousand detections.
-fn lying_share(robot: &RobotId, tick: u64, class: Station) -> EmbeddingMsg {
-    let vote = VoteMsg {
-        robot: robot.clone(),
-        instance: 4,
-        tick,
-        steps: vec![StepVote { class, confidence: 1.0 }; 21],
-        visibility: 1000,
-        quality: 1.0,
-        worker: None,
-        signature: Vec::new(),
-    };
-    EmbeddingMsg {
-        robot: robot.clone(),
-        instance: 4,
-        tick,
-        embedding: None,
-        visibility: 1000,
-        vote: Some(vote),
-        worker: None,
-        facing: None,
-        landmarks: Vec::new(),
-        verdict: None,
-    }
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_confident_liar_with_a_valid_certificate_stops_counting() {
     let _serial = serial().await;
