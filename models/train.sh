@@ -3,7 +3,7 @@
 #
 #   1. spwi-sim dataset (scenarios 1-3): the spatial graphs, as the paper builds them
 #      (image distances, appearance) and as our sets do (floor distances, each node's
-#      floor relations: --node-features floor_relations, agent/src/graph.rs);
+#      floor relations: --node-features floor_relations, core/src/graph.rs);
 #   2. train_gcn.py: a GCN on each, exported to ONNX (`paper` ships the first, every
 #      other set the second);
 #   3. spwi-sim dataset --gcn gcn.onnx: the temporal rows, with the embeddings the
@@ -12,7 +12,7 @@
 #   4. train_temporal.py per model set: ego-GRU, collective-GRU (and the 1D-CNN baseline
 #      for the default set), temperature scaling, export, checks, manifest. `paper` is
 #      the paper's design (rows: embeddings and keypoints); `relations` adds the
-#      worker's relations to the mapped stations (agent/src/floor/); `default` also
+#      worker's relations to the mapped stations (core/src/floor/); `default` also
 #      reads where the worker's body faces against each station; `peer-set` is
 #      `relations` that pools one relation block per peer heard in its collective GRU;
 #      all share the GCN and data.

@@ -201,7 +201,7 @@ fn replay(file: &std::path::Path, config: &AgentConfig) -> Result<()> {
     let recording = crate::record::read(file)?;
     let models = daemon::load_models(config)?;
     let replayed = crate::record::replay(&recording, &models)?;
-    let decisions = replayed.outputs.iter().filter(|o| matches!(o, crate::engine::Output::Decision(_))).count();
+    let decisions = replayed.outputs.iter().filter(|o| matches!(o, spwi_core::engine::Output::Decision(_))).count();
     first_difference("output", &replayed.outputs, &recording.outputs)?;
     first_difference("peer state (trust, frozen feeds)", &replayed.states, &recording.states)?;
     println!(

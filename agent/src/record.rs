@@ -20,11 +20,13 @@
 //! Log and publish times are nanoseconds of engine time: the fleet's clock, time since
 //! the Unix epoch.
 
-use crate::engine::{Engine, EngineConfig, Input, Output};
-use crate::model::ModelSet;
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
-use spwi_proto::{decode, encode, RobotId, PROTOCOL_VERSION};
+use spwi_core::engine::io::TOPICS_READ;
+use spwi_core::engine::{Engine, EngineConfig, Input, Output};
+use spwi_core::model::ModelSet;
+use spwi_proto::keys::Topic;
+use spwi_proto::{RobotId, PROTOCOL_VERSION};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
@@ -81,7 +83,8 @@ struct MembershipRecord {
 pub struct Recorder {
     writer: mcap::Writer<BufWriter<File>>,
     /// MCAP channel id of each [`Channel`], by its index.
-    channels: [u16; Channel::ALL.len()],
+    /// Each channel and its id in the file.
+    channels: Vec<(Channel, u16)>,
     sequence: u32,
 }
 
@@ -89,52 +92,36 @@ pub struct Recorder {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Channel {
     Config,
-    InDetections,
-    InEmbedding,
-    InBallots,
-    InMap,
+    /// A message the robot received on this topic.
+    In(Topic),
     InMembership,
     InPoll,
-    OutEmbedding,
-    OutVote,
-    OutBallots,
-    OutDecision,
-    OutMap,
+    /// A message the robot published on this topic.
+    Out(Topic),
     State,
 }
 
 impl Channel {
-    const ALL: [Channel; 13] = [
-        Channel::Config,
-        Channel::InDetections,
-        Channel::InEmbedding,
-        Channel::InBallots,
-        Channel::InMap,
-        Channel::InMembership,
-        Channel::InPoll,
-        Channel::OutEmbedding,
-        Channel::OutVote,
-        Channel::OutBallots,
-        Channel::OutDecision,
-        Channel::OutMap,
-        Channel::State,
-    ];
+    /// Every channel, in the order a recording declares them.
+    fn all() -> Vec<Channel> {
+        let received = TOPICS_READ.into_iter().map(Channel::In);
+        let published = Topic::ALL.into_iter().filter(|&t| t != Topic::Detections).map(Channel::Out);
+        std::iter::once(Channel::Config)
+            .chain(received)
+            .chain([Channel::InMembership, Channel::InPoll])
+            .chain(published)
+            .chain(std::iter::once(Channel::State))
+            .collect()
+    }
 
-    fn topic(self) -> &'static str {
+    fn topic(self) -> String {
         match self {
-            Channel::Config => "/spwi/config",
-            Channel::InDetections => "/spwi/in/detections",
-            Channel::InEmbedding => "/spwi/in/embedding",
-            Channel::InBallots => "/spwi/in/ballots",
-            Channel::InMap => "/spwi/in/map",
-            Channel::InMembership => "/spwi/in/membership",
-            Channel::InPoll => "/spwi/in/poll",
-            Channel::OutEmbedding => "/spwi/out/embedding",
-            Channel::OutVote => "/spwi/out/vote",
-            Channel::OutBallots => "/spwi/out/ballots",
-            Channel::OutDecision => "/spwi/out/decision",
-            Channel::OutMap => "/spwi/out/map",
-            Channel::State => "/spwi/state",
+            Channel::Config => "/spwi/config".into(),
+            Channel::In(t) => format!("/spwi/in/{}", t.as_str()),
+            Channel::InMembership => "/spwi/in/membership".into(),
+            Channel::InPoll => "/spwi/in/poll".into(),
+            Channel::Out(t) => format!("/spwi/out/{}", t.as_str()),
+            Channel::State => "/spwi/state".into(),
         }
     }
 
@@ -146,7 +133,7 @@ impl Channel {
     }
 
     fn of_topic(topic: &str) -> Option<Channel> {
-        Channel::ALL.into_iter().find(|c| c.topic() == topic)
+        Channel::all().into_iter().find(|c| c.topic() == topic)
     }
 }
 
@@ -158,9 +145,9 @@ impl Recorder {
             .chunk_size(Some(64 * 1024))
             .create(BufWriter::new(file))
             .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-        let mut channels = [0; Channel::ALL.len()];
-        for c in Channel::ALL {
-            channels[c as usize] = writer.add_channel(0, c.topic(), c.encoding(), &BTreeMap::new())?;
+        let mut channels = Vec::new();
+        for c in Channel::all() {
+            channels.push((c, writer.add_channel(0, &c.topic(), c.encoding(), &BTreeMap::new())?));
         }
         let mut r = Recorder { writer, channels, sequence: 0 };
         r.write(Channel::Config, Duration::ZERO, &serde_json::to_vec(config)?)?;
@@ -171,7 +158,7 @@ impl Recorder {
         self.sequence += 1;
         let t = now.as_nanos() as u64;
         let header = mcap::records::MessageHeader {
-            channel_id: self.channels[channel as usize],
+            channel_id: self.channels.iter().find(|(c, _)| *c == channel).expect("every channel is declared").1,
             sequence: self.sequence,
             log_time: t,
             publish_time: t,
@@ -181,28 +168,22 @@ impl Recorder {
     }
 
     pub fn input(&mut self, input: &Input, now: Duration) -> Result<()> {
+        if let Some((topic, bytes)) = input.to_wire() {
+            return self.write(Channel::In(topic), now, &bytes);
+        }
         match input {
-            Input::Frame(m) => self.write(Channel::InDetections, now, &encode(m)),
-            Input::Embedding(m) => self.write(Channel::InEmbedding, now, &encode(m)),
-            Input::Ballots(m) => self.write(Channel::InBallots, now, &encode(m)),
-            Input::Map(m) => self.write(Channel::InMap, now, &encode(m)),
             Input::MemberJoined(r) | Input::MemberLeft(r) => {
                 let alive = matches!(input, Input::MemberJoined(_));
                 let json = serde_json::to_vec(&MembershipRecord { robot: r.clone(), alive })?;
                 self.write(Channel::InMembership, now, &json)
             }
-            Input::Poll => self.write(Channel::InPoll, now, &[]),
+            _ => self.write(Channel::InPoll, now, &[]),
         }
     }
 
     pub fn output(&mut self, output: &Output, now: Duration) -> Result<()> {
-        match output {
-            Output::Embedding(m) => self.write(Channel::OutEmbedding, now, &encode(m)),
-            Output::Vote(m) => self.write(Channel::OutVote, now, &encode(m)),
-            Output::Ballots(m) => self.write(Channel::OutBallots, now, &encode(m)),
-            Output::Decision(m) => self.write(Channel::OutDecision, now, &encode(m)),
-            Output::Map(m) => self.write(Channel::OutMap, now, &encode(m)),
-        }
+        let (topic, bytes) = output.to_wire();
+        self.write(Channel::Out(topic), now, &bytes)
     }
 
     pub fn state(&mut self, state: &PeerState, now: Duration) -> Result<()> {
@@ -259,20 +240,18 @@ pub fn read(path: &Path) -> Result<Recording> {
                 }
                 config = Some(serde_json::from_value(raw).with_context(ctx)?)
             }
-            Some(Channel::InDetections) => inputs.push((now, Input::Frame(decode(d).with_context(ctx)?))),
-            Some(Channel::InEmbedding) => inputs.push((now, Input::Embedding(decode(d).with_context(ctx)?))),
-            Some(Channel::InBallots) => inputs.push((now, Input::Ballots(decode(d).with_context(ctx)?))),
-            Some(Channel::InMap) => inputs.push((now, Input::Map(decode(d).with_context(ctx)?))),
+            Some(Channel::In(topic)) => {
+                let input = Input::from_recording(topic, d).with_context(ctx)?;
+                inputs.push((now, input.with_context(ctx)?));
+            }
             Some(Channel::InMembership) => {
                 let r: MembershipRecord = serde_json::from_slice(d).with_context(ctx)?;
                 inputs.push((now, if r.alive { Input::MemberJoined(r.robot) } else { Input::MemberLeft(r.robot) }));
             }
             Some(Channel::InPoll) => inputs.push((now, Input::Poll)),
-            Some(Channel::OutEmbedding) => outputs.push(Output::Embedding(decode(d).with_context(ctx)?)),
-            Some(Channel::OutVote) => outputs.push(Output::Vote(decode(d).with_context(ctx)?)),
-            Some(Channel::OutBallots) => outputs.push(Output::Ballots(decode(d).with_context(ctx)?)),
-            Some(Channel::OutDecision) => outputs.push(Output::Decision(decode(d).with_context(ctx)?)),
-            Some(Channel::OutMap) => outputs.push(Output::Map(decode(d).with_context(ctx)?)),
+            Some(Channel::Out(topic)) => {
+                outputs.push(Output::from_recording(topic, d).with_context(ctx)?.with_context(ctx)?)
+            }
             Some(Channel::State) => states.push(serde_json::from_slice(d).with_context(ctx)?),
             None => bail!("{}: unknown topic {:?} (not a spwi recording?)", path.display(), m.channel.topic),
         }
@@ -305,7 +284,7 @@ pub fn replay(recording: &Recording, models: &Arc<ModelSet>) -> Result<Replayed>
 mod tests {
     use super::*;
     use crate::config::TickConfig;
-    use crate::manifest::Manifest;
+    use spwi_core::manifest::Manifest;
 
     #[test]
     fn a_recording_of_another_protocol_is_refused_saying_so() {

@@ -2,10 +2,11 @@
 //! membership change, and at least twice a second whatever peers send, so HTTP readers
 //! never touch the loop's state. `/healthz` reads its [`Health`].
 
-use crate::clock::PeerClock;
-use crate::engine::Engine;
-use crate::metrics::{Metrics, TransportCounters};
+use crate::metrics::TransportCounters;
 use serde::Serialize;
+use spwi_core::clock::PeerClock;
+use spwi_core::engine::Engine;
+use spwi_core::metrics::Metrics;
 use spwi_proto::{DecisionMsg, RobotId, Station};
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -49,14 +50,14 @@ pub struct Status {
     /// Peers whose feeds repeat themselves: left out of the tick until they change.
     pub stale_peers: Vec<RobotId>,
     /// The trust this robot has learned of each robot judged so far, itself included
-    /// (`crate::trust`): how often its votes and its worker estimates agreed with the
+    /// (`spwi_core::trust`): how often its votes and its worker estimates agreed with the
     /// others' lately.
     pub trust: BTreeMap<RobotId, f32>,
     /// The engine's counters and stage timings.
     pub metrics: Metrics,
     /// The daemon's: messages refused before the engine, outgoing ones dropped.
     pub transport: TransportCounters,
-    /// How each live peer's ticks sit against our clock ([`crate::clock::PeerClock`]):
+    /// How each live peer's ticks sit against our clock ([`spwi_core::clock::PeerClock`]):
     /// a peer whose messages keep being refused shows here with its estimated offset.
     pub clocks: BTreeMap<RobotId, PeerClock>,
     /// Whether frames come in and ticks get decided (`/healthz`).
@@ -148,11 +149,11 @@ impl Status {
 
     /// `/metrics`: the counters and histograms, then the state of the feeds and trust.
     pub fn prometheus(&self) -> String {
-        use crate::metrics::{exposition, registry, ByLabel};
+        use crate::metrics::{exposition, register_engine, registry, ByLabel};
         use prometheus_client::metrics::gauge::ConstGauge;
         use prometheus_client::metrics::MetricType;
         let mut r = registry(&self.robot);
-        self.metrics.register(&mut r, self.members.len());
+        register_engine(&self.metrics, &mut r, self.members.len());
         self.transport.register(&mut r);
         r.register(
             "spwi_feed_stale",

@@ -3,7 +3,7 @@
 The export is one .npy per array plus dataset.json (see sim/src/dataset.rs). The
 temporal arrays are ordered episode-major, then tick, then robot, so they reshape to
 [episodes, ticks, robots, ...]. Batches are built here exactly as the daemon builds its
-window (agent/src/temporal.rs): the W ticks ending at t, left-padded with zeros before
+window (core/src/temporal.rs): the W ticks ending at t, left-padded with zeros before
 the first tick, a row of zeros where a part is missing (worker not seen, no peer saw
 it), and `frames` of the W rows picked at uniform intervals by the same formula.
 With `relations`, a row is the keypoints and the worker's relations to the mapped
@@ -12,7 +12,7 @@ With `peer_set` too, the collective's rows are the team's as the robot holds it 
 hears a random subset of its peers (`relations_heard`), and a second input holds one
 relation block per peer it heard (`relations_peers`). With `facing`, each relation row
 also ends with where the worker's body faces against each station (`facing_ego` or
-`facing_team`: agent/src/floor/relations.rs, `facing`).
+`facing_team`: core/src/floor/relations.rs, `facing`).
 """
 import json
 import os
@@ -24,11 +24,11 @@ CLASSES = 4
 EMBEDDING = 128
 KEYPOINTS = 34
 FEATURE = 1024
-# agent/src/floor/relations.rs: RELATION_DIM (TRACK_VALUES + 4 stations x PER_STATION)
+# core/src/floor/relations.rs: RELATION_DIM (TRACK_VALUES + 4 stations x PER_STATION)
 TRACK_VALUES = 3
 PER_STATION = 6
 RELATIONS = TRACK_VALUES + CLASSES * PER_STATION
-# agent/src/floor/relations.rs: FACING_DIM ([facing known] + 4 stations x [cos, sin])
+# core/src/floor/relations.rs: FACING_DIM ([facing known] + 4 stations x [cos, sin])
 FACING = 1 + CLASSES * 2
 SPLITS = {"train": 0, "validation": 1, "test": 2}
 
@@ -132,7 +132,7 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
         if seqs.rel_peers is None:
             raise SystemExit("a peer-set model needs an export with relations_peers (spwi-sim dataset, 2026-12-02 on)")
         return (torch.cat([kp, seqs.rel_heard[E, tt, R] * v], -1), seqs.rel_peers[E, tt, R] * v[..., None]), labels
-    if relations and kind != "cnn1d":  # agent/src/temporal.rs, RowLayout::Relations: keypoints ‖ relations
+    if relations and kind != "cnn1d":  # core/src/temporal.rs, RowLayout::Relations: keypoints ‖ relations
         rel = seqs.rel_ego if kind == "ego" else seqs.rel_team
         parts = [kp, rel[E, tt, R] * v]
         if facing:  # RowLayout::RelationsFacing: ‖ facing
@@ -146,7 +146,7 @@ def batch(seqs, e, t, r, window, frames, horizon, kind, peer_rng=None, peer_drop
         return (torch.cat([seqs.feature[E, tt, R] * v, kp], -1),), labels
     assert kind == "collective"
     # Each peer's share of the tick before, as the daemon holds it when it votes on its
-    # own frame (agent/src/engine.rs, `vote`); nothing before the first tick.
+    # own frame (core/src/engine/step.rs, `vote`); nothing before the first tick.
     before, had = (tt - 1).clamp(min=0), (tt > 0)[..., None].float()
     all_emb = seqs.emb[E, before]  # [B, F, R, 128]
     present = seqs.seen[E, before].float() * v * had  # [B, F, R]

@@ -75,7 +75,7 @@ class Cnn1dGRU(nn.Module):
 
 class StationScorer(nn.Module):
     """Reads relation rows (keypoints ‖ track values ‖ per station, in class order,
-    agent/src/floor/relations.rs) and gives logits [B, H+1, 4] like TemporalGRU.
+    core/src/floor/relations.rs) and gives logits [B, H+1, 4] like TemporalGRU.
 
     Every station goes through the same GRU and head, so a station's score depends on
     its relation to the worker, never on which class slot it sits in: what is learned
@@ -148,7 +148,7 @@ def station_values(rel):
 
 class PeerSetScorer(StationScorer):
     """A StationScorer whose collective input also holds one relation block per peer
-    heard ([B, F, P, RELATIONS], agent/src/floor/relations.rs `peer_set`: that peer's
+    heard ([B, F, P, RELATIONS], core/src/floor/relations.rs `peer_set`: that peer's
     own estimate of the worker against the team map, empty slots zero). Per station,
     each peer's relation to it and its track values (presence, speed, position sigma:
     its view quality) go through one small network phi; their masked mean and max over
@@ -176,7 +176,7 @@ class PeerSetScorer(StationScorer):
 
 
 class FacingScorer(StationScorer):
-    """A StationScorer over rows that end with the facing block (agent/src/floor/
+    """A StationScorer over rows that end with the facing block (core/src/floor/
     relations.rs `facing`: [known], then per station [cos, sin] of its bearing relative
     to where the worker's body faces). Each station's row gains its own two values and
     the known flag, so the rule learned holds for every station alike."""

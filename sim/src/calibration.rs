@@ -1,7 +1,7 @@
 //! The simulated camera as an agent's configuration describes it: what a robot of a
 //! floor would be calibrated with. (Every generated floor uses the agent's default.)
 
-use spwi_agent::floor::CameraCalibration;
+use spwi_core::floor::CameraCalibration;
 use spwi_world::layout::Camera;
 
 pub fn of(cam: &Camera) -> CameraCalibration {

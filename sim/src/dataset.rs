@@ -42,10 +42,10 @@ use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
-use spwi_agent::floor::{self, FACING_DIM, RELATION_DIM};
-use spwi_agent::graph::{GraphBuilder, NodeFeatures, OnFloor, NODE_FEATURE_DIM};
-use spwi_agent::model::{Backend, Gcn};
-use spwi_agent::temporal::normalise_keypoints;
+use spwi_core::floor::{self, FACING_DIM, RELATION_DIM};
+use spwi_core::graph::{GraphBuilder, NodeFeatures, OnFloor, NODE_FEATURE_DIM};
+use spwi_core::model::{Backend, Gcn};
+use spwi_core::temporal::normalise_keypoints;
 use spwi_proto::{DetectionFrame, RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
 use spwi_world::generate::NamedLayout;
 use spwi_world::world::{Scenario, World};
@@ -72,7 +72,7 @@ pub struct DatasetOptions {
     pub layouts: String,
     /// Graph size and edge weights; from the GCN's manifest when given.
     pub max_nodes: usize,
-    pub edge_weight: spwi_agent::graph::EdgeWeight,
+    pub edge_weight: spwi_core::graph::EdgeWeight,
     /// What the graph's distances and node features are made of.
     pub node_features: NodeFeatures,
     /// The GCN file whose embeddings fill the temporal part, if any.
@@ -411,7 +411,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             "samples": samples,
             "sampling": format!("every {}th tick of each robot, when it sees the worker", o.spatial_every),
             "arrays": {
-                "x": ["float32", ["samples", n, o.node_features.dim()], "node features: global scene feature ‖ local feature (‖ floor relations with node_features floor_relations: agent/src/graph.rs); node 0 is the worker; padding rows are zero"],
+                "x": ["float32", ["samples", n, o.node_features.dim()], "node features: global scene feature ‖ local feature (‖ floor relations with node_features floor_relations: core/src/graph.rs); node 0 is the worker; padding rows are zero"],
                 "adj": ["float32", ["samples", n, n], "normalised adjacency D^-1/2 (A + I) D^-1/2 of the star graph, zero padding"],
                 "node_mask": ["uint8", ["samples", n], "1 for real nodes"],
                 "label": ["uint8", ["samples"], "station the worker is heading to now"],
@@ -434,12 +434,12 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                 "split": ["uint8", ["rows"], "0 train, 1 validation, 2 test"],
                 "robot": ["uint8", ["rows"], "robot slot"],
                 "tick": ["uint32", ["rows"], "tick within the episode"],
-                "relations_ego": ["float32", ["rows", RELATION_DIM], "the worker's relations to the mapped stations from the robot's own track and map (agent/src/floor/relations.rs)"],
+                "relations_ego": ["float32", ["rows", RELATION_DIM], "the worker's relations to the mapped stations from the robot's own track and map (core/src/floor/relations.rs)"],
                 "relations_team": ["float32", ["rows", RELATION_DIM], "the same from the team's fused track and shared map, every robot of the episode a peer"],
                 "relations_heard": ["float32", ["rows", RELATION_DIM], format!("the same when the robot hears a random subset of the others (drawn per episode and robot: how many uniform in 0..robots-1, then which), each of their messages lost with probability {HEARD_LOSS}")],
                 "relations_peers": ["float32", ["rows", PEER_SLOTS, RELATION_DIM], "one relation block per peer heard in relations_heard: that peer's own estimate against the robot's team map; empty slots zero (floor::peer_set)"],
-                "facing_ego": ["float32", ["rows", FACING_DIM], "where the worker's body faces (from the robot's own keypoints) against the stations of its own map, from its own track (agent/src/floor/relations.rs, facing)"],
-                "facing_team": ["float32", ["rows", FACING_DIM], "the team's facing (circular mean of its robots', agent/src/floor/relations.rs, fuse_facings) against the team's fused track and shared map"],
+                "facing_ego": ["float32", ["rows", FACING_DIM], "where the worker's body faces (from the robot's own keypoints) against the stations of its own map, from its own track (core/src/floor/relations.rs, facing)"],
+                "facing_team": ["float32", ["rows", FACING_DIM], "the team's facing (circular mean of its robots', core/src/floor/relations.rs, fuse_facings) against the team's fused track and shared map"],
                 "embedding": ["float32", ["rows", EMBEDDING_DIM], "GCN embedding of the worker node (only with --gcn; zeros when not seen)"],
                 "gcn_logits": ["float32", ["rows", NUM_CLASSES], "GCN logits (only with --gcn; zeros when not seen)"],
                 "human_feature": ["float32", ["rows", NODE_FEATURE_DIM], "the worker node's feature, global ‖ local (only with --human-features; zeros when not seen)"],
@@ -491,7 +491,7 @@ pub struct DatasetArgs {
     pub max_nodes: usize,
     /// Edge weights, unless --gcn names a model set (then: its manifest's).
     #[arg(long, default_value = "proximity", value_parser = parse_edge_weight)]
-    pub edge_weight: spwi_agent::graph::EdgeWeight,
+    pub edge_weight: spwi_core::graph::EdgeWeight,
     /// What the graph is made of, unless --gcn names a model set (then: its
     /// manifest's): "appearance" (image distances, the paper's) or "floor_relations"
     /// (floor distances, each node's relations to the worker).
@@ -540,7 +540,7 @@ pub fn main(a: DatasetArgs) -> Result<()> {
     }
     let (gcn, max_nodes, edge_weight, node_features) = match gcn {
         Some(dir) if dir.is_dir() => {
-            let m = spwi_agent::manifest::Manifest::load(&dir)?;
+            let m = spwi_core::manifest::Manifest::load(&dir)?;
             (Some(dir.join(&m.models.gcn.file)), m.max_nodes, m.edge_weight, m.node_features)
         }
         file => (file, max_nodes, edge_weight, node_features),
@@ -580,7 +580,7 @@ fn parse_choice<T: serde::de::DeserializeOwned>(s: &str, what: &str, choices: &s
         .map_err(|_| format!("unknown {what} {s:?}; use {choices}"))
 }
 
-fn parse_edge_weight(s: &str) -> Result<spwi_agent::graph::EdgeWeight, String> {
+fn parse_edge_weight(s: &str) -> Result<spwi_core::graph::EdgeWeight, String> {
     parse_choice(s, "edge weight", "\"proximity\" or \"distance\"")
 }
 
@@ -613,7 +613,7 @@ mod tests {
             floors: vec![NamedLayout { name: "test".into(), layout: spwi_world::layout::Layout::default_layout() }],
             layouts: "test".into(),
             max_nodes: 16,
-            edge_weight: spwi_agent::graph::EdgeWeight::Proximity,
+            edge_weight: spwi_core::graph::EdgeWeight::Proximity,
             node_features,
             gcn,
             human_features: true,

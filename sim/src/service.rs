@@ -88,7 +88,7 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
     let truth_key = keys::truth(&opts.fleet);
     // Frames are stamped on the fleet's clock, a few ms into each of its periods, as
     // cameras triggered on it would: a restarted world goes on at the current tick.
-    let clock = spwi_agent::clock::FleetClock::default();
+    let clock = spwi_core::clock::FleetClock::default();
     let into_next = tick_start(tick_at(clock.now()) + 1) + Duration::from_millis(5);
     let mut interval = tokio::time::interval_at(tokio::time::Instant::now() + clock.until(into_next), TICK_PERIOD);
     interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);

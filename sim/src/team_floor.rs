@@ -12,7 +12,7 @@
 //! seconds on a new floor, which is a different question.
 
 use anyhow::Result;
-use spwi_agent::floor::{self, CameraCalibration, FloorView, StationMap};
+use spwi_core::floor::{self, CameraCalibration, FloorView, StationMap};
 use spwi_proto::{DetectionFrame, Landmark, RobotId, WorkerEstimate};
 use spwi_world::layout::Layout;
 use spwi_world::world::{Scenario, World};

@@ -6,7 +6,7 @@
 
 pub mod netns;
 
-use spwi_agent::model::{Backend, ModelSet};
+use spwi_core::model::{Backend, ModelSet};
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
 pub use spwi_sim::loopback::{secured_peer, AgentProcess, Decisions, Hub, InProcessAgent, Launch, Routers};
@@ -78,7 +78,7 @@ pub fn scripted_frame(robot: &RobotId, index: usize, tick: u64) -> DetectionFram
 
 /// The tick of the fleet's clock now (the host's wall clock).
 pub fn clock_tick() -> u64 {
-    tick_at(spwi_agent::clock::FleetClock::default().now())
+    tick_at(spwi_core::clock::FleetClock::default().now())
 }
 
 /// Publishes a frame per robot per tick of the fleet's clock, captured at the tick's
@@ -96,7 +96,7 @@ impl Publisher {
         let ticks = Arc::new(Mutex::new(None));
         let t = ticks.clone();
         let task = tokio::spawn(async move {
-            let clock = spwi_agent::clock::FleetClock::default();
+            let clock = spwi_core::clock::FleetClock::default();
             // 5 ms into each period of the clock, as a camera triggered on it.
             let into_next = tick_start(tick_at(clock.now()) + 1) + Duration::from_millis(5);
             let start = tokio::time::Instant::now() + clock.until(into_next);
@@ -213,7 +213,7 @@ pub fn flood_changed_nothing(
     from: u64,
     to: u64,
 ) {
-    use spwi_agent::clock::OffClock;
+    use spwi_core::clock::OffClock;
     for a in agents {
         let gap = decisions.longest_gap(&a.robot, from, to);
         assert!(gap <= 1, "{} left {gap} ticks in a row undecided during the flood", a.robot);

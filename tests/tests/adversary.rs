@@ -13,7 +13,7 @@ use spwi_agent::config::AgentConfig;
 use spwi_agent::fleet::authority::{self, Validity};
 use spwi_agent::fleet::{FleetDir, Role};
 use spwi_agent::metrics::DropReason;
-use spwi_agent::model::{Backend, ModelSet};
+use spwi_core::model::{Backend, ModelSet};
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::*;
 use spwi_sim::service::{self, WorldOptions};

@@ -175,7 +175,7 @@ async fn a_recorded_run_replays_to_the_same_decisions_bit_for_bit() {
         let decided: Vec<_> = replayed
             .outputs
             .iter()
-            .filter_map(|o| if let spwi_agent::engine::Output::Decision(d) = o { Some(d.clone()) } else { None })
+            .filter_map(|o| if let spwi_core::engine::Output::Decision(d) = o { Some(d.clone()) } else { None })
             .collect();
         assert!(decided.len() >= 20, "only {} decisions recorded", decided.len());
         assert_eq!(recording.states.len(), decided.len(), "one peer state per decision");
@@ -236,7 +236,7 @@ async fn a_robot_that_joins_a_working_fleet_is_sent_its_station_map() {
         let received: Vec<_> = recording
             .inputs
             .iter()
-            .filter_map(|(_, i)| if let spwi_agent::engine::Input::Map(m) = i { Some(m.clone()) } else { None })
+            .filter_map(|(_, i)| if let spwi_core::engine::Input::Map(m) = i { Some(m.clone()) } else { None })
             .collect();
         assert_eq!(received.len(), 2, "{received:?}");
         assert!(received.iter().all(|m| sent.contains(m)));

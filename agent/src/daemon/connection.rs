@@ -4,6 +4,7 @@
 //! never blocks Zenoh); everything else happens in the event loop.
 
 use anyhow::{anyhow, bail, Result};
+use spwi_core::engine::io::TOPICS_READ;
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::{FleetId, RobotId};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -41,9 +42,8 @@ pub(super) struct Connection {
 
 impl Connection {
     /// Opens the session, refuses a robot id a live daemon holds, subscribes to what
-    /// it reads (its own detections and every robot's embedding messages, votes and
-    /// verdicts inside, relayed ballots and station maps; not the votes alone nor the
-    /// decisions, which are for observers) and declares this robot's liveliness token.
+    /// a robot reads ([`TOPICS_READ`]: its own detections, every robot's shares,
+    /// ballots and maps) and declares this robot's liveliness token.
     pub async fn open(zenoh: zenoh::Config, fleet: &FleetId, robot: &RobotId, queue: usize) -> Result<Connection> {
         let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
         let alive_key = keys::alive(fleet, robot);
@@ -52,12 +52,12 @@ impl Connection {
         let (tx, messages) = mpsc::channel::<Message>(queue);
         let overflow = Arc::new(AtomicU64::new(0));
         let mut subscribers = Vec::new();
-        for (key, topic) in [
-            (keys::robot_topic(fleet, robot, Topic::Detections), Topic::Detections),
-            (keys::all_robots(fleet, Topic::Embedding), Topic::Embedding),
-            (keys::all_robots(fleet, Topic::Ballots), Topic::Ballots),
-            (keys::all_robots(fleet, Topic::Map), Topic::Map),
-        ] {
+        for topic in TOPICS_READ {
+            // Our own detections; every robot's share of the rest.
+            let key = match topic {
+                Topic::Detections => keys::robot_topic(fleet, robot, topic),
+                _ => keys::all_robots(fleet, topic),
+            };
             let (tx, overflow, fleet) = (tx.clone(), overflow.clone(), fleet.clone());
             let sub = session
                 .declare_subscriber(&key)

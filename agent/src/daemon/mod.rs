@@ -4,7 +4,7 @@
 //! callbacks ([`connection`]); decoding, checks and counting happen in the loop, so a
 //! bad message costs one log line (rate-limited, [`log`]) and one counter. The loop
 //! also wakes at the engine's next deadline, so ticks are decided on time even when
-//! peers fall silent. Its clock is the fleet's ([`crate::clock::FleetClock`]): the
+//! peers fall silent. Its clock is the fleet's ([`spwi_core::clock::FleetClock`]): the
 //! host's wall clock, which chrony or PTP keeps in step with the other robots'. What goes out is put on Zenoh by a thread of its own
 //! ([`publishing`]), and `/status` is refreshed after each decision and membership
 //! change. The `spwi-agent` process gives its heap's free pages back every half minute
@@ -20,18 +20,17 @@ mod log;
 pub mod memory;
 mod publishing;
 
-use crate::clock::FleetClock;
 use crate::config::AgentConfig;
-use crate::engine::{Engine, EngineConfig, Input, Output};
 use crate::metrics::{DropReason, TransportCounters};
-use crate::model::ModelSet;
 use crate::record::{PeerState, RecordedConfig, Recorder};
 use crate::status::{Health, RecentDecision, SharedStatus, Status};
 use anyhow::Result;
 use connection::{Connection, Membership, Message};
 use log::RateLimitedLog;
 use publishing::Outbox;
-use spwi_proto::keys::Topic;
+use spwi_core::clock::FleetClock;
+use spwi_core::engine::{Engine, EngineConfig, Input, Output};
+use spwi_core::model::ModelSet;
 use spwi_proto::*;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
@@ -153,8 +152,9 @@ pub async fn run(
             }
             msg = conn.messages.recv() => match msg {
                 None => break,
-                Some(Message { topic, robot: r, bytes }) => match decode_input(topic, &r, &bytes) {
-                    Ok(i) => i,
+                Some(Message { topic, robot: r, bytes }) => match Input::from_peer(topic, &r, &bytes) {
+                    Ok(Some(i)) => i,
+                    Ok(None) => continue, // a topic robots do not read
                     Err(e) => {
                         transport.bad_messages(DropReason::from(&e), 1);
                         bad_log.warn(|| format!("dropped a bad message on {}'s {}: {e}", r, topic.as_str()));
@@ -251,16 +251,6 @@ pub async fn run(
 
 /// How often `/status` and `/metrics` are refreshed at least.
 const STATUS_REFRESH: Duration = Duration::from_millis(500);
-
-fn decode_input(topic: Topic, robot: &RobotId, bytes: &[u8]) -> Result<Input, DecodeError> {
-    Ok(match topic {
-        Topic::Detections => Input::Frame(decode_from(bytes, robot)?),
-        Topic::Embedding => Input::Embedding(decode_from(bytes, robot)?),
-        Topic::Vote | Topic::Decision => unreachable!("the connection subscribes to no votes alone, no decisions"),
-        Topic::Ballots => Input::Ballots(decode_from(bytes, robot)?),
-        Topic::Map => Input::Map(decode_from(bytes, robot)?),
-    })
-}
 
 async fn sleep_until(deadline: Option<tokio::time::Instant>) {
     match deadline {

@@ -4,10 +4,10 @@
 //! When the thread falls behind, the loop drops and counts messages instead.
 
 use super::log::RateLimitedLog;
-use crate::engine::Output;
 use anyhow::{anyhow, Result};
+use spwi_core::engine::Output;
 use spwi_proto::keys::{self, Topic};
-use spwi_proto::{encode, FleetId, RobotId};
+use spwi_proto::{FleetId, RobotId};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -67,14 +67,7 @@ impl Outbox {
     /// Queues one of the engine's outputs; `false` (and counted) when the thread is
     /// behind.
     pub fn publish(&self, output: &Output) -> bool {
-        let message = match output {
-            Output::Embedding(m) => (Topic::Embedding, encode(m)),
-            Output::Vote(m) => (Topic::Vote, encode(m)),
-            Output::Ballots(m) => (Topic::Ballots, encode(m)),
-            Output::Decision(m) => (Topic::Decision, encode(m)),
-            Output::Map(m) => (Topic::Map, encode(m)),
-        };
-        let queued = self.tx.try_send(message).is_ok();
+        let queued = self.tx.try_send(output.to_wire()).is_ok();
         if !queued {
             self.dropped.fetch_add(1, Ordering::Relaxed);
         }

@@ -16,7 +16,7 @@
 //! it inputs, so recordings replay without keys.
 
 use super::Credentials;
-use crate::engine::{Input, Output};
+use spwi_core::engine::{Input, Output};
 use spwi_proto::{FleetId, RobotId, VoteMsg};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;

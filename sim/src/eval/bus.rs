@@ -10,7 +10,7 @@
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use spwi_agent::engine::{Engine, Input, Output};
+use spwi_core::engine::{Engine, Input, Output};
 use spwi_proto::{RobotId, Station, StepVote, VoteMsg, MAX_OBJECTS};
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -146,30 +146,22 @@ impl Bus {
     }
 
     fn broadcast(&mut self, from: usize, at: Duration, o: &Output) {
-        let input = match o {
-            Output::Embedding(e) => {
-                let mut e = e.clone();
-                if let Some(s) = self.lies[from] {
-                    let horizon = self.engines[from].horizon();
+        // What peers read of it (not votes alone, not decisions), as a liar sends it.
+        let Some(mut input) = o.to_peer() else { return };
+        if let Some(s) = self.lies[from] {
+            let horizon = self.engines[from].horizon();
+            match &mut input {
+                Input::Embedding(e) => {
                     e.vote = Some(lie(&e.robot, e.instance, e.tick, s, horizon));
                     e.visibility = MAX_OBJECTS as u32 + 1;
                 }
-                Input::Embedding(e)
-            }
-            Output::Ballots(b) => {
-                let mut b = b.clone();
-                if let Some(s) = self.lies[from] {
-                    let horizon = self.engines[from].horizon();
+                Input::Ballots(b) => {
                     b.votes.retain(|v| v.robot != b.robot);
                     b.votes.push(lie(&b.robot, b.instance, b.tick, s, horizon));
                 }
-                Input::Ballots(b)
+                _ => {}
             }
-            // Robots read neither votes alone nor decisions: both come in their
-            // peers' embedding messages (the vote, the verdict).
-            Output::Vote(_) | Output::Decision(_) => return,
-            Output::Map(m) => Input::Map(m.clone()),
-        };
+        }
         for to in 0..self.engines.len() {
             if to == from || !self.live[to] {
                 continue;
@@ -215,10 +207,10 @@ fn lie(robot: &RobotId, instance: u64, tick: u64, station: Station, horizon: usi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use spwi_agent::config::TickConfig;
-    use spwi_agent::engine::EngineConfig;
-    use spwi_agent::model::{Backend, ModelSet};
-    use spwi_agent::temporal::TemporalModel;
+    use spwi_core::engine::EngineConfig;
+    use spwi_core::model::{Backend, ModelSet};
+    use spwi_core::settings::TickConfig;
+    use spwi_core::temporal::TemporalModel;
     use spwi_proto::{DecidedBy, RobotId};
     use spwi_world::layout::Layout;
     use spwi_world::world::{stream, Scenario, Stream, World};

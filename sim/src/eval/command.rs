@@ -182,7 +182,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         Some(d) => d,
         None => crate::eval::find_model_set(root, window, horizon, frames)?,
     };
-    let models = spwi_agent::model::ModelSet::load(&dir, spwi_agent::model::Backend::Tract, None)?;
+    let models = spwi_core::model::ModelSet::load(&dir, spwi_core::model::Backend::Tract, None)?;
     let report = crate::eval::run(&crate::eval::EvalOptions {
         scenario: world.scenario,
         robots,

@@ -7,7 +7,7 @@
 //! The prediction is the same for t and every future step: the model has no notion of
 //! a goal changing.
 
-use spwi_agent::floor::track::Axis;
+use spwi_core::floor::track::Axis;
 use spwi_world::geometry::P2;
 use std::collections::VecDeque;
 

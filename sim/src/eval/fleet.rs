@@ -12,10 +12,10 @@ use super::score::{confuse, Confusion, Tally};
 use super::EvalOptions;
 use crate::faulty_camera::{LoopingCamera, StuckCamera};
 use anyhow::Result;
-use spwi_agent::engine::{Engine, EngineConfig, Input, Output};
-use spwi_agent::temporal::TemporalModel;
-use spwi_agent::vote;
-use spwi_proto::{encode, RobotId, Station, WorkerPhase, NUM_CLASSES};
+use spwi_core::engine::{Engine, EngineConfig, Input, Output};
+use spwi_core::temporal::TemporalModel;
+use spwi_core::vote;
+use spwi_proto::{RobotId, Station, WorkerPhase, NUM_CLASSES};
 use spwi_world::geometry::{norm, sub};
 use spwi_world::layout::Layout;
 use spwi_world::worker::route_bends;
@@ -430,7 +430,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let (mut messages, mut bytes) = (0, 0);
         bus.run_until(now + TICK, |slot, _, out| {
             messages += 1;
-            bytes += encoded_len(out);
+            bytes += out.to_wire().1.len();
             match out {
                 Output::Embedding(e) if e.tick == tick => embeddings[slot] = e.embedding.clone(),
                 Output::Vote(v) if v.tick == tick => votes[slot] = Some(v.steps.iter().map(|s| s.class).collect()),
@@ -445,7 +445,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             let held: Vec<f64> = (0..n)
                 .filter(|&j| j != slot && bus.is_live(j))
                 .map(|j| {
-                    f64::from(bus.engine(j).trust().get(&ids[slot]).copied().unwrap_or(spwi_agent::trust::UNJUDGED))
+                    f64::from(bus.engine(j).trust().get(&ids[slot]).copied().unwrap_or(spwi_core::trust::UNJUDGED))
                 })
                 .collect();
             if !held.is_empty() {
@@ -570,17 +570,6 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
     }
     Ok(tallies)
-}
-
-/// The bytes of an output as the daemon would publish it.
-fn encoded_len(o: &Output) -> usize {
-    match o {
-        Output::Embedding(m) => encode(m).len(),
-        Output::Vote(m) => encode(m).len(),
-        Output::Ballots(m) => encode(m).len(),
-        Output::Decision(m) => encode(m).len(),
-        Output::Map(m) => encode(m).len(),
-    }
 }
 
 #[cfg(test)]

@@ -33,9 +33,9 @@ use crate::dataset::episode_seed;
 use anyhow::{bail, Context, Result};
 use score::{estimate, Accuracy, Confusion, Tally};
 use serde::Serialize;
-use spwi_agent::config::TickConfig;
-use spwi_agent::manifest::Manifest;
-use spwi_agent::model::ModelSet;
+use spwi_core::manifest::Manifest;
+use spwi_core::model::ModelSet;
+use spwi_core::settings::TickConfig;
 use spwi_proto::Station;
 use spwi_world::generate::NamedLayout;
 use spwi_world::layout::CameraPolicy;
@@ -549,7 +549,7 @@ pub fn print(r: &Report) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use spwi_agent::model::Backend;
+    use spwi_core::model::Backend;
 
     fn fixture() -> Arc<ModelSet> {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
@@ -843,7 +843,7 @@ mod tests {
 
     #[test]
     fn consensus_figures_match_a_hand_computed_case() {
-        use spwi_agent::consensus::{decide, Ballot, Rule, Weights};
+        use spwi_core::consensus::{decide, Ballot, Rule, Weights};
         use spwi_proto::{RobotId, Station::*, StepVote};
         // Robot a sees 3 detections and says 2 (confidence 0.9); b sees 1 and says 1 (0.6);
         // c sees 4 and says 1 (0.3). α = β = 0.5:

@@ -7,12 +7,12 @@
 
 use super::cvm::{Cvm, HEAD_HEIGHT};
 use anyhow::Result;
-use spwi_agent::floor::{CameraCalibration, FloorView};
-use spwi_agent::graph::{GraphBuilder, NodeFeatures, NODE_FEATURE_DIM};
-use spwi_agent::manifest::ModelKind;
-use spwi_agent::model::{Inference, Input, ModelSet, Runner};
-use spwi_agent::temporal::{frame_offsets, normalise_keypoints, Row, RowLayout, TemporalModel, Window, CNN1D_DIM};
-use spwi_agent::vote;
+use spwi_core::floor::{CameraCalibration, FloorView};
+use spwi_core::graph::{GraphBuilder, NodeFeatures, NODE_FEATURE_DIM};
+use spwi_core::manifest::ModelKind;
+use spwi_core::model::{Inference, Input, ModelSet, Runner};
+use spwi_core::temporal::{frame_offsets, normalise_keypoints, Row, RowLayout, TemporalModel, Window, CNN1D_DIM};
+use spwi_core::vote;
 use spwi_proto::{DetectionFrame, Station, NUM_CLASSES};
 use std::collections::BTreeMap;
 use std::sync::Arc;

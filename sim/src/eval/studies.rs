@@ -5,8 +5,8 @@ use super::{find_model_set, run, EvalOptions, Faults, Report};
 use crate::world_args::BUILT_IN;
 use anyhow::Result;
 use serde::Serialize;
-use spwi_agent::config::{ConsensusRule, TickConfig};
-use spwi_agent::model::{Backend, ModelSet};
+use spwi_core::model::{Backend, ModelSet};
+use spwi_core::settings::{ConsensusRule, TickConfig};
 use spwi_world::generate::{self, LayoutSource, NamedLayout};
 use spwi_world::layout::{CameraPolicy, Layout};
 use spwi_world::world::Scenario;
@@ -507,7 +507,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
     let _ = writeln!(w, "\n## Beyond the paper: faults (scenario 3, 4 robots, 2 s → 2 s)\n");
     let _ = writeln!(
         w,
-        "Each fault three times: with the paper's protocol (each vote sent once, every feed believed, the paper's consensus rule) and with ours (`[tick]` defaults: the ballots each robot holds relayed {} ms into the tick and sent up to {} times from then to the deadline by a robot still missing a vote, a camera repeating the same worker detection {} times set aside, peers trusted below {} left out of the fusion; `agent/src/engine.rs`) under each consensus rule: *paper* (normalised shares of visibility and confidence) and *trust* (each vote's log-likelihood ratio weighted by the voter's agreement with the others over the last {} decided ticks and by its view of the worker; `agent/src/consensus.rs`, `agent/src/trust.rs`). The daemon's default rule is `{}`. *Healthy collective*: the collective GRU of the robots whose camera works. Messages and bytes: what each robot publishes per tick.\n",
+        "Each fault three times: with the paper's protocol (each vote sent once, every feed believed, the paper's consensus rule) and with ours (`[tick]` defaults: the ballots each robot holds relayed {} ms into the tick and sent up to {} times from then to the deadline by a robot still missing a vote, a camera repeating the same worker detection {} times set aside, peers trusted below {} left out of the fusion; `core/src/engine/`) under each consensus rule: *paper* (normalised shares of visibility and confidence) and *trust* (each vote's log-likelihood ratio weighted by the voter's agreement with the others over the last {} decided ticks and by its view of the worker; `core/src/consensus.rs`, `core/src/trust.rs`). The daemon's default rule is `{}`. *Healthy collective*: the collective GRU of the robots whose camera works. Messages and bytes: what each robot publishes per tick.\n",
         TickConfig::default().relay_ms,
         TickConfig::default().ask_rounds,
         TickConfig::default().stale_after_frames,
@@ -598,7 +598,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         );
         let _ = writeln!(
             w,
-            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `relations`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `agent/src/floor/`), and votes from the track while it is fresh. `peer-set`: the relations rows, and a collective GRU that also pools one relation block per peer it heard (each peer's own estimate of the worker against the team map; DeepSets over 0–7 peers, `models/README.md`). `default`: the relations rows, each followed by where the worker's body faces against every station (the ego GRU's from the robot's own keypoints, the collective's fused over the robots whose estimates make the team's track, each sharing its own in its embedding message). CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
+            "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `relations`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `core/src/floor/`), and votes from the track while it is fresh. `peer-set`: the relations rows, and a collective GRU that also pools one relation block per peer it heard (each peer's own estimate of the worker against the team map; DeepSets over 0–7 peers, `models/README.md`). `default`: the relations rows, each followed by where the worker's body faces against every station (the ego GRU's from the robot's own keypoints, the collective's fused over the robots whose estimates make the team's track, each sharing its own in its embedding message). CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
         );
         let _ = writeln!(
             w,

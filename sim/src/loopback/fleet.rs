@@ -219,7 +219,7 @@ impl LoopbackFleet {
     /// with the fleet clock's tick now ([`World::follow_clock`]); returns when the first
     /// was published (simulating the cameras is not the fleet's work).
     pub async fn publish(&self, world: &mut World) -> Result<Instant> {
-        world.follow_clock(spwi_agent::clock::FleetClock::default().now());
+        world.follow_clock(spwi_core::clock::FleetClock::default().now());
         let frames: Vec<Vec<u8>> =
             self.ids.iter().enumerate().map(|(slot, id)| encode(&world.observe(slot, id))).collect();
         let sent = Instant::now();
@@ -234,7 +234,7 @@ impl LoopbackFleet {
 /// tick's frames every [`spwi_proto::TICK_PERIOD`] from then stamps each with its own
 /// tick ([`LoopbackFleet::publish`]), never two with one.
 pub fn next_tick_instant() -> Instant {
-    let clock = spwi_agent::clock::FleetClock::default();
+    let clock = spwi_core::clock::FleetClock::default();
     let at = spwi_proto::tick_start(spwi_proto::tick_at(clock.now()) + 1) + Duration::from_millis(5);
     Instant::now() + clock.until(at)
 }

@@ -6,7 +6,7 @@ use super::Hub;
 use anyhow::{anyhow, Context, Result};
 use spwi_agent::config::AgentConfig;
 use spwi_agent::daemon::{self, Options, Started};
-use spwi_agent::model::ModelSet;
+use spwi_core::model::ModelSet;
 use spwi_proto::RobotId;
 use std::path::PathBuf;
 use std::sync::Arc;

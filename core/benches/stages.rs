@@ -2,17 +2,17 @@
 //! star graph, GCN, ego-GRU, collective-GRU, vote + consensus, a whole tick through the
 //! engine, and encode/decode of every message. Reports p50 / p99 / mean per call.
 //!
-//! Run: `cargo bench -p spwi-agent --bench stages` (add `--features ort` and set
+//! Run: `cargo bench -p spwi-core --bench stages` (add `--features ort` and set
 //! ORT_DYLIB_PATH to include ONNX Runtime). `SPWI_BENCH_MODELS=DIR` picks a model set
 //! (default: models/default, the shipped trained set).
 
-use spwi_agent::consensus::{self, Ballot, Rule};
-use spwi_agent::engine::{Engine, EngineConfig, Input};
-use spwi_agent::graph::GraphBuilder;
-use spwi_agent::model::{Backend, ModelSet};
-use spwi_agent::temporal::TemporalModel;
-use spwi_agent::trust::TrustBook;
-use spwi_agent::vote;
+use spwi_core::consensus::{self, Ballot, Rule};
+use spwi_core::engine::{Engine, EngineConfig, Input};
+use spwi_core::graph::GraphBuilder;
+use spwi_core::model::{Backend, ModelSet};
+use spwi_core::temporal::TemporalModel;
+use spwi_core::trust::TrustBook;
+use spwi_core::vote;
 use spwi_proto::*;
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -62,7 +62,7 @@ fn bench_backend(backend: Backend) {
     println!("\n== {backend:?} (model set {:?}, W = {}, H = {}, {} nodes)", m.name, m.window, m.horizon, m.max_nodes);
     let f = frame(1, 12);
     let mut graph = GraphBuilder::new(m.max_nodes, m.edge_weight, m.node_features);
-    let camera = spwi_agent::floor::CameraCalibration::default();
+    let camera = spwi_core::floor::CameraCalibration::default();
     measure(&format!("star graph (12 objects, {:?})", m.node_features), 20_000, || {
         black_box(graph.build(black_box(&f), Some(synthetic::on_floor(&camera))));
     });
@@ -78,7 +78,7 @@ fn bench_backend(backend: Backend) {
     }
     let ego_in = vec![0.1f32; m.frames() * TemporalModel::Ego.row_dim(m.row)];
     let col_in = vec![0.1f32; m.frames() * TemporalModel::Collective.row_dim(m.row)];
-    let col_peers = vec![0.1f32; m.frames() * col.peer_slots() * spwi_agent::floor::RELATION_DIM];
+    let col_peers = vec![0.1f32; m.frames() * col.peer_slots() * spwi_core::floor::RELATION_DIM];
     measure("ego-GRU", 3_000, || {
         black_box(ego.gru(black_box(&ego_in), &[]).unwrap());
     });

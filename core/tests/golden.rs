@@ -8,8 +8,8 @@
 //! The ort runtime is checked when built with `--features ort`; it then needs
 //! `ORT_DYLIB_PATH` (`.ci/run` sets it to the onnxruntime wheel's library).
 
-use spwi_agent::manifest::{GcnNodes, ModelKind};
-use spwi_agent::model::{Backend, Input, ModelSet};
+use spwi_core::manifest::{GcnNodes, ModelKind};
+use spwi_core::model::{Backend, Input, ModelSet};
 use std::path::{Path, PathBuf};
 
 mod synthetic;
@@ -218,8 +218,8 @@ fn a_model_file_changed_after_the_set_was_made_is_refused_naming_it() {
     bytes[mid] ^= 0x40;
     std::fs::write(&path, &bytes).unwrap();
     let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/fixture");
-    let spec = spwi_agent::manifest::Manifest::load(&shipped).unwrap().models.ego_gru;
-    spwi_agent::manifest::check_onnx(&path, &spec).expect("the tampered file still parses and fits");
+    let spec = spwi_core::manifest::Manifest::load(&shipped).unwrap().models.ego_gru;
+    spwi_core::manifest::check_onnx(&path, &spec).expect("the tampered file still parses and fits");
     let e = ModelSet::load(&dir, Backend::Tract, None).unwrap_err().to_string();
     assert!(e.contains("ego_gru.onnx") && e.contains("SHA-256") && e.contains("changed"), "{e}");
     // A manifest that names no digest is refused too.
@@ -294,8 +294,8 @@ fn a_set_whose_graphs_the_daemon_cannot_build_is_refused_naming_the_tensor() {
 
 #[test]
 fn the_daemons_gcn_gives_the_padded_graphs_outputs_from_its_real_nodes_alone() {
-    use spwi_agent::graph::GraphBuilder;
-    use spwi_agent::temporal::TemporalModel;
+    use spwi_core::graph::GraphBuilder;
+    use spwi_core::temporal::TemporalModel;
     for set in ["fixture", "default"] {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models").join(set);
         let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
@@ -304,7 +304,7 @@ fn the_daemons_gcn_gives_the_padded_graphs_outputs_from_its_real_nodes_alone() {
         let mut inference = set.inference(TemporalModel::Ego).unwrap();
         let mut padded = set.runner(ModelKind::Gcn).unwrap();
         let mut builder = GraphBuilder::new(m.max_nodes, m.edge_weight, m.node_features);
-        let camera = spwi_agent::floor::CameraCalibration::default();
+        let camera = spwi_core::floor::CameraCalibration::default();
         for objects in [0, 3, m.max_nodes - 1] {
             let g = builder.build(&synthetic::frame(1, objects), Some(synthetic::on_floor(&camera))).unwrap().clone();
             let (n, f) = (m.max_nodes, g.x.len() / m.max_nodes);

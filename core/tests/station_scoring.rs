@@ -7,10 +7,10 @@
 //! Likewise a set that pools its peers (`peer_slots`) must not care which slot holds
 //! which peer.
 
-use spwi_agent::floor::relations::{FACING_HEAD, FACING_PER_STATION, PER_STATION, TRACK_VALUES};
-use spwi_agent::manifest::ModelKind;
-use spwi_agent::model::{Backend, Input, ModelSet};
-use spwi_agent::temporal::{RowLayout, TemporalModel, RELATION_ROW_DIM};
+use spwi_core::floor::relations::{FACING_HEAD, FACING_PER_STATION, PER_STATION, TRACK_VALUES};
+use spwi_core::manifest::ModelKind;
+use spwi_core::model::{Backend, Input, ModelSet};
+use spwi_core::temporal::{RowLayout, TemporalModel, RELATION_ROW_DIM};
 use spwi_proto::{KEYPOINT_VALUES, NUM_CLASSES};
 use std::path::Path;
 

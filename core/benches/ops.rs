@@ -2,11 +2,11 @@
 //! mean time per run, batch 1, single-threaded; the GCN on a star graph of the worker
 //! and three objects (what the simulated floors show), the GRUs on one window.
 //!
-//! Run: `cargo bench -p spwi-agent --bench ops` (`SPWI_BENCH_MODELS=DIR` picks a model
+//! Run: `cargo bench -p spwi-core --bench ops` (`SPWI_BENCH_MODELS=DIR` picks a model
 //! set, default models/default; `SPWI_BENCH_OPS_TOP=N` rows per model, default 12).
 
-use spwi_agent::manifest::{Dim, Manifest};
-use spwi_agent::model::{profile_nodes, Input};
+use spwi_core::manifest::{Dim, Manifest};
+use spwi_core::model::{profile_nodes, Input};
 use std::path::PathBuf;
 use std::time::Duration;
 

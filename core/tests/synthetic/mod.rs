@@ -1,5 +1,5 @@
 //! A made-up detection frame, shared by the golden tests and the stage benchmark
-//! (`agent/benches/stages.rs` includes this file by path): the worker in the middle of
+//! (`core/benches/stages.rs` includes this file by path): the worker in the middle of
 //! a 640 × 480 image and `objects` objects in a row below it, each class in turn and
 //! each with an appearance feature of its own, seen by a robot at a fixed floor pose,
 //! and the worker's track on that floor.
@@ -36,6 +36,6 @@ pub static WORKER: WorkerEstimate =
     WorkerEstimate { position: [5.0, 4.5], velocity: [0.8, 0.3], covariance: [0.04, 0.0, 0.1] };
 
 /// [`frame`] on the floor, through `camera`.
-pub fn on_floor(camera: &spwi_agent::floor::CameraCalibration) -> spwi_agent::graph::OnFloor<'_> {
-    spwi_agent::graph::OnFloor { camera, worker: &WORKER }
+pub fn on_floor(camera: &spwi_core::floor::CameraCalibration) -> spwi_core::graph::OnFloor<'_> {
+    spwi_core::graph::OnFloor { camera, worker: &WORKER }
 }

@@ -34,6 +34,7 @@
 //! robot holding the same votes and weights reaches the same decision, bit for bit,
 //! whatever order the votes arrived in.
 
+use crate::hash::Fnv1a;
 use crate::vote::argmax;
 use spwi_proto::{RobotId, Station, StepVote, TeamStep, VoteMsg, NUM_CLASSES};
 
@@ -163,23 +164,6 @@ pub fn digest(ballots: &[Ballot<'_>]) -> u64 {
         }
     }
     h.0
-}
-
-/// FNV-1a, 64 bits: a hash that is the same on every robot and every build.
-pub(crate) struct Fnv1a(pub u64);
-
-impl Default for Fnv1a {
-    fn default() -> Self {
-        Fnv1a(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Fnv1a {
-    pub fn eat(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-        }
-    }
 }
 
 #[cfg(test)]

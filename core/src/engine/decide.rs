@@ -1,0 +1,137 @@
+//! Deciding a tick: once our frame is in and every active member voted or abstained,
+//! or when the deadline passes, the ballots held become the team's decision, and each
+//! voter is judged against the others ([`crate::trust`]).
+//!
+//! Membership decides whom to wait for: live members (liveliness) that have spoken at
+//! least once, so a peer that joins never stalls a tick, and one that leaves is not
+//! waited for. Each ballot weighs the trust its receiver learned of its voter, never
+//! what the voter says of itself; since that trust is learned from the ballots decided
+//! on alone, robots that counted the same ballots weigh them alike. The decision names a
+//! digest of the ballots counted; each robot's next share carries it in brief
+//! ([`Verdict`]), so comparing verdicts measures how often the team agrees without any
+//! robot hearing every peer's decisions.
+
+use super::rounds::{ballots, ANSWERED_TICKS};
+use super::{Engine, Output, Tick};
+use crate::consensus::{self, Ballot};
+use crate::metrics::{Metrics, Stage};
+use spwi_proto::*;
+use std::time::{Duration, Instant};
+
+impl Engine {
+    pub(super) fn advance_all(&mut self, now: Duration, out: &mut Vec<Output>) {
+        let ticks: Vec<u64> = self.open.keys().copied().collect();
+        for t in ticks {
+            self.advance(t, now, out);
+        }
+    }
+
+    /// Moves tick `t` on as far as its messages and `now` allow.
+    pub(super) fn advance(&mut self, t: u64, now: Duration, out: &mut Vec<Output>) {
+        let Some(tick) = self.open.get(&t) else { return };
+        let decision_due = now >= tick.started + self.cfg.decision_deadline;
+
+        // Relay, then ask: partway through the tick, the ballots we hold go to every peer.
+        self.run_rounds(t, now, out);
+
+        // The decision, once our frame is in and every active member voted or abstained.
+        let tick = &self.open[&t];
+        let all_voted = tick.own_frame.is_some() && !self.waits_for_a_vote(tick);
+        if all_voted {
+            self.decide(t, DecidedBy::AllVoted, now, out);
+        } else if decision_due {
+            self.decide(t, DecidedBy::Deadline, now, out);
+        }
+    }
+
+    /// Some active member has neither voted nor abstained in `tick` (as far as we heard).
+    pub(super) fn waits_for_a_vote(&self, tick: &Tick) -> bool {
+        self.live.intersection(&self.active).any(|r| !tick.abstaining.contains(r) && !tick.votes.contains_key(r))
+    }
+
+    pub(super) fn decide(&mut self, t: u64, by: DecidedBy, now: Duration, out: &mut Vec<Output>) {
+        // Deciding before the relay time: if we relay the tick, the ballots we hold go
+        // out now, since a peer that lost one of them may still be waiting.
+        if self.owes_relay(t) {
+            out.push(ballots(&self.cfg, t, &self.open[&t].votes));
+        }
+        let mut tick = self.open.remove(&t).expect("open");
+        let t0 = Instant::now();
+        // Each ballot weighs what we learned of its voter. Voters we doubt are set
+        // aside while one we trust votes, and never decide a tick for the team while
+        // a trusted member (we at least) is live: the tick then goes without a class.
+        let all: Vec<Ballot<'_>> = tick.votes.values().map(|v| Ballot::of(v, self.trust.weight(&v.robot))).collect();
+        let trusted = |b: &&Ballot<'_>| self.trust.counts(b.robot);
+        let members = || std::iter::once(&self.cfg.robot).chain(self.live.iter());
+        let anyone_trusted = all.iter().any(|b| trusted(&b)) || members().any(|r| self.trust.counts(r));
+        let mut counted: Vec<Ballot<'_>> = all.iter().filter(|b| !anyone_trusted || trusted(b)).copied().collect();
+        // Nor does a voter not yet established decide a tick alone while a member the
+        // team has seen agree is live.
+        if let [alone] = counted[..] {
+            let others_established = members().any(|m| m != alone.robot && self.trust.established(m));
+            if others_established && !self.trust.established(alone.robot) {
+                counted.clear();
+            }
+        }
+        let steps = consensus::decide(&mut counted, self.cfg.consensus);
+        let digest = consensus::digest(&counted);
+        let voters: Vec<RobotId> = counted.iter().map(|b| b.robot.clone()).collect();
+        self.metrics.votes_set_aside += (all.len() - counted.len()) as u64;
+        self.trust.learn(&all); // tick.votes is a map by robot: `all` is in robot order
+        let estimates: Vec<(&RobotId, &WorkerEstimate)> =
+            tick.votes.values().filter_map(|v| Some((&v.robot, v.worker.as_ref()?))).collect();
+        self.trust.learn_tracks(&estimates);
+        self.metrics.observe(Stage::Consensus, t0.elapsed());
+        if let Some(arrived) = tick.own_frame {
+            self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(arrived));
+        }
+        self.metrics.decisions += 1;
+        if by == DecidedBy::Deadline {
+            self.metrics.decisions_by_deadline += 1;
+        }
+        let d = DecisionMsg {
+            robot: self.cfg.robot.clone(),
+            instance: self.cfg.instance,
+            tick: t,
+            steps: steps.clone(),
+            voters,
+            live_members: self.live.len() as u32 + 1,
+            decided_by: by,
+            digest,
+        };
+        let ours = Verdict::of(&d);
+        for theirs in std::mem::take(&mut tick.peer_verdicts).values() {
+            record_agreement(&mut self.metrics, &ours, theirs);
+        }
+        self.settled.insert(t, tick);
+        while self.settled.len() > ANSWERED_TICKS {
+            self.settled.pop_first();
+        }
+        self.unshared_verdict = Some(ours.clone());
+        self.decided.insert(t, ours);
+        self.last_decision = Some(d.clone());
+        out.push(Output::Decision(d));
+    }
+
+    /// A peer's verdict against ours for its tick, now or when we decide it.
+    pub(super) fn compare(&mut self, peer: &RobotId, theirs: Verdict) {
+        if let Some(ours) = self.decided.get(&theirs.tick) {
+            record_agreement(&mut self.metrics, ours, &theirs);
+        } else if let Some(tick) = self.open.get_mut(&theirs.tick) {
+            tick.peer_verdicts.insert(peer.clone(), theirs);
+        }
+    }
+}
+
+/// Counts one comparison of our verdict of a tick with a peer's.
+fn record_agreement(m: &mut Metrics, ours: &Verdict, theirs: &Verdict) {
+    m.agreement_compared += 1;
+    m.agreement_same += u64::from(ours.class == theirs.class);
+    if ours.digest != theirs.digest {
+        m.ballot_sets_differ += 1;
+        let theirs_has_ours = ours.voters.iter().all(|v| theirs.voters.binary_search(v).is_ok());
+        if theirs_has_ours && theirs.voters.len() > ours.voters.len() {
+            m.decided_on_fewer_ballots += 1;
+        }
+    }
+}

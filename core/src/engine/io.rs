@@ -1,0 +1,158 @@
+//! What happens to a robot ([`Input`]) and what it publishes ([`Output`]), and the one
+//! mapping between them and the wire: which topic each travels on, its bytes, and which
+//! topics a robot reads at all. The daemon, the recorder and the evaluation's simulated
+//! bus all go through here.
+
+use spwi_proto::keys::Topic;
+use spwi_proto::*;
+
+/// Everything that can happen to a robot.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Input {
+    Frame(DetectionFrame),
+    /// A peer's share of a tick, its vote inside.
+    Embedding(EmbeddingMsg),
+    /// The ballots a peer holds for a tick.
+    Ballots(BallotsMsg),
+    /// Where a member's map puts the stations (sent when a robot joins).
+    Map(MapMsg),
+    MemberJoined(RobotId),
+    MemberLeft(RobotId),
+    /// Time passed: deadlines may have expired.
+    Poll,
+}
+
+impl Input {
+    /// The tick the input is for, if it names one.
+    pub fn tick(&self) -> Option<u64> {
+        match self {
+            Input::Frame(f) => Some(f.tick()),
+            Input::Embedding(e) => Some(e.tick),
+            Input::Ballots(b) => Some(b.tick),
+            Input::Map(_) | Input::MemberJoined(_) | Input::MemberLeft(_) | Input::Poll => None,
+        }
+    }
+}
+
+/// What the robot publishes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Output {
+    /// Our share of a tick, our vote inside.
+    Embedding(EmbeddingMsg),
+    /// Our vote again, alone, for observers (peers read it in our share).
+    Vote(VoteMsg),
+    Ballots(BallotsMsg),
+    Decision(DecisionMsg),
+    /// Our team map, for a robot that just joined.
+    Map(MapMsg),
+}
+/// The topics a robot reads: its own detections, and its peers' shares, ballots and
+/// maps. Votes alone and decisions are for observers: a robot reads both in its peers'
+/// shares (the vote inside, the verdict in brief).
+pub const TOPICS_READ: [Topic; 4] = [Topic::Detections, Topic::Embedding, Topic::Ballots, Topic::Map];
+
+impl Input {
+    /// A message that `from` published on `topic`, as the engine takes it; the message
+    /// must name `from` as its robot. `Ok(None)` for a topic robots do not read
+    /// ([`TOPICS_READ`]).
+    pub fn from_peer(topic: Topic, from: &RobotId, bytes: &[u8]) -> Result<Option<Input>, DecodeError> {
+        Input::decode(topic, bytes, Some(from))
+    }
+
+    /// A message input as a recording holds it (its origin was checked on arrival).
+    pub fn from_recording(topic: Topic, bytes: &[u8]) -> Result<Option<Input>, DecodeError> {
+        Input::decode(topic, bytes, None)
+    }
+
+    fn decode(topic: Topic, bytes: &[u8], from: Option<&RobotId>) -> Result<Option<Input>, DecodeError> {
+        fn read<M: Message>(bytes: &[u8], from: Option<&RobotId>) -> Result<M, DecodeError> {
+            match from {
+                Some(robot) => decode_from(bytes, robot),
+                None => decode(bytes),
+            }
+        }
+        Ok(Some(match topic {
+            Topic::Detections => Input::Frame(read(bytes, from)?),
+            Topic::Embedding => Input::Embedding(read(bytes, from)?),
+            Topic::Ballots => Input::Ballots(read(bytes, from)?),
+            Topic::Map => Input::Map(read(bytes, from)?),
+            Topic::Vote | Topic::Decision => return Ok(None),
+        }))
+    }
+
+    /// The topic and bytes of a message input; `None` for membership and polls.
+    pub fn to_wire(&self) -> Option<(Topic, Vec<u8>)> {
+        Some(match self {
+            Input::Frame(m) => (Topic::Detections, encode(m)),
+            Input::Embedding(m) => (Topic::Embedding, encode(m)),
+            Input::Ballots(m) => (Topic::Ballots, encode(m)),
+            Input::Map(m) => (Topic::Map, encode(m)),
+            Input::MemberJoined(_) | Input::MemberLeft(_) | Input::Poll => return None,
+        })
+    }
+}
+
+impl Output {
+    /// The topic it is published on, and its bytes.
+    pub fn to_wire(&self) -> (Topic, Vec<u8>) {
+        match self {
+            Output::Embedding(m) => (Topic::Embedding, encode(m)),
+            Output::Vote(m) => (Topic::Vote, encode(m)),
+            Output::Ballots(m) => (Topic::Ballots, encode(m)),
+            Output::Decision(m) => (Topic::Decision, encode(m)),
+            Output::Map(m) => (Topic::Map, encode(m)),
+        }
+    }
+
+    /// An output as a recording holds it. `Ok(None)` for a topic robots do not publish
+    /// (detections).
+    pub fn from_recording(topic: Topic, bytes: &[u8]) -> Result<Option<Output>, DecodeError> {
+        Ok(Some(match topic {
+            Topic::Embedding => Output::Embedding(decode(bytes)?),
+            Topic::Vote => Output::Vote(decode(bytes)?),
+            Topic::Ballots => Output::Ballots(decode(bytes)?),
+            Topic::Decision => Output::Decision(decode(bytes)?),
+            Topic::Map => Output::Map(decode(bytes)?),
+            Topic::Detections => return Ok(None),
+        }))
+    }
+
+    /// What a peer takes in of it: `None` for votes alone and decisions, which robots
+    /// do not read ([`TOPICS_READ`]).
+    pub fn to_peer(&self) -> Option<Input> {
+        match self {
+            Output::Embedding(m) => Some(Input::Embedding(m.clone())),
+            Output::Ballots(m) => Some(Input::Ballots(m.clone())),
+            Output::Map(m) => Some(Input::Map(m.clone())),
+            Output::Vote(_) | Output::Decision(_) => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every output a robot publishes on a topic robots read comes back as the input
+    /// its peers take; the others are read by no robot.
+    #[test]
+    fn what_robots_publish_and_read_round_trips_through_the_wire() {
+        let robot = RobotId::new("r1").unwrap();
+        let outputs = [
+            Output::Map(MapMsg { robot: robot.clone(), instance: 7, stations: Default::default() }),
+            Output::Ballots(BallotsMsg { robot: robot.clone(), instance: 7, tick: 3, votes: vec![] }),
+        ];
+        for o in outputs {
+            let (topic, bytes) = o.to_wire();
+            assert!(TOPICS_READ.contains(&topic));
+            assert_eq!(Input::from_peer(topic, &robot, &bytes).unwrap(), o.to_peer());
+            assert_eq!(Output::from_recording(topic, &bytes).unwrap(), Some(o.clone()));
+            let other = RobotId::new("r2").unwrap();
+            assert!(Input::from_peer(topic, &other, &bytes).is_err(), "a message must name its publisher");
+        }
+        for topic in [Topic::Vote, Topic::Decision] {
+            assert!(!TOPICS_READ.contains(&topic));
+            assert_eq!(Input::from_peer(topic, &robot, b"anything").unwrap(), None);
+        }
+    }
+}
