@@ -158,7 +158,7 @@ async fn run(args: Args) -> Result<()> {
         config.http.listen = Some(h);
     }
     if let Some(m) = args.models {
-        config.models.dir = m;
+        config.models.dir = Some(m);
     }
     init_tracing(config.log.format);
     config.validate()?;

@@ -25,8 +25,10 @@ pub struct AgentConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ModelsConfig {
-    /// Folder of the model set (holding `manifest.json`).
-    pub dir: PathBuf,
+    /// Folder of the model set (holding `manifest.json`); default: the set `default`
+    /// where `spwi_core::model::locate` finds it (the current directory's `models/`,
+    /// beside the executable, an installed data directory, …).
+    pub dir: Option<PathBuf>,
     pub backend: Backend,
     /// `libonnxruntime.so` for the ort backend; default: `ORT_DYLIB_PATH`.
     pub ort_library: Option<PathBuf>,
@@ -64,7 +66,7 @@ pub struct LogConfig {
 
 impl Default for ModelsConfig {
     fn default() -> Self {
-        ModelsConfig { dir: PathBuf::from("models/default"), backend: Backend::Tract, ort_library: None }
+        ModelsConfig { dir: None, backend: Backend::Tract, ort_library: None }
     }
 }
 
@@ -118,7 +120,7 @@ impl AgentConfig {
         for (var, _) in ENV_OVERRIDES {
             let Some(v) = get(var) else { continue };
             match var {
-                "SPWI_MODELS_DIR" => self.models.dir = PathBuf::from(v),
+                "SPWI_MODELS_DIR" => self.models.dir = Some(PathBuf::from(v)),
                 "SPWI_BACKEND" => self.models.backend = parse(var, &v)?,
                 "SPWI_ORT_LIBRARY" => self.models.ort_library = Some(PathBuf::from(v)),
                 "SPWI_HTTP" => self.http.listen = if v.is_empty() { None } else { Some(parse(var, &v)?) },
@@ -157,7 +159,7 @@ mod tests {
         assert_eq!(cfg.tick.temporal, TemporalModel::Ego);
         assert_eq!(cfg.tick.decision_deadline_ms, 80);
         assert_eq!(cfg.tick.relay_ms, 40);
-        // Robots no longer wait for peers' embeddings before voting (protocol 8).
+        // A setting this build does not know is refused, naming it.
         let e = toml::from_str::<AgentConfig>("[tick]\nembedding_wait_ms = 30\n").unwrap_err().to_string();
         assert!(e.contains("unknown field `embedding_wait_ms`"), "{e}");
     }

@@ -14,7 +14,7 @@
 //! lost the third message while each was express, in a batch of its own. Measured
 //! with the soak (8 agents, two CPU hogs beside them): 57 and 75 of 950 settled ticks
 //! missing a decision with 2 batches, 0 and 0 with 8 (docs/BENCHMARKS.md, "Soak").
-//! Since the messages are no longer express they share a batch when the link lags
+//! Messages that are not express share a batch when the link lags
 //! (`daemon/publishing.rs`), so they need fewer; the margin stays.
 //!
 //! A router carries every client's burst on each of its links: with 16 robots as its

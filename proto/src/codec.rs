@@ -11,14 +11,9 @@ use crate::messages::*;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
-/// Bumped on every incompatible change of any payload (2: robot pose in the detection
-/// frame, worker estimate and landmarks in the embedding message; 3: relayed ballots,
-/// the ballot digest in the decision; 4: the voter's standing and view quality in the
-/// vote; 5: the voter's signature; 6: the worker's facing in the embedding message;
-/// 7: the robot's latest verdict in the embedding message; 8: the vote in the embedding
-/// message, which robots read it from; 9: the frame's capture time on the fleet's clock
-/// instead of a tick counter; in the vote no self-reported trust, and the voter's
-/// worker estimate).
+/// The protocol this build speaks, first in every message. Bumped on every
+/// incompatible change of any payload: a message of another version is refused and
+/// counted (`DecodeError::UnknownVersion`), never misread.
 pub const PROTOCOL_VERSION: u16 = 9;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is

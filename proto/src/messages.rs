@@ -14,10 +14,12 @@ pub const KEYPOINT_VALUES: usize = 34;
 /// Length of the GCN's human-node embedding that robots share.
 pub const EMBEDDING_DIM: usize = 128;
 /// The period of a tick: every frame, vote and decision belongs to one (10 Hz).
-pub const TICK_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
+pub const TICK_PERIOD: std::time::Duration = std::time::Duration::from_micros(TICK_US);
+/// Ticks in a second of the fleet's clock: the rate at which the team decides.
+pub const TICKS_PER_SECOND: u32 = 10;
 /// [`TICK_PERIOD`] in microseconds: tick `t` is the fleet clock's period
 /// `[t · TICK_US, (t + 1) · TICK_US)` µs after the Unix epoch.
-pub const TICK_US: u64 = 100_000;
+pub const TICK_US: u64 = 1_000_000 / TICKS_PER_SECOND as u64;
 
 /// The tick a moment of the fleet's clock (time since the Unix epoch) falls in.
 pub fn tick_at(t: std::time::Duration) -> u64 {

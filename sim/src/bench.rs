@@ -11,8 +11,8 @@
 //! `--routers N` makes the robots Zenoh clients of N routers instead of a peer mesh;
 //! `--router-down-at` kills the first router mid-run, to see how the fleet carries on.
 
-use crate::loopback::percentile;
 use crate::loopback::{layout_with_slots, FleetOptions, LoopbackFleet, Usage};
+use crate::measures::{Agreement, LatencyMs};
 use anyhow::Result;
 use serde::Serialize;
 use spwi_agent::cli::init_tracing;
@@ -28,24 +28,6 @@ pub struct BenchOptions {
     pub scenario: Scenario,
     /// Kill router 0 this long after the measurement starts.
     pub router_down_at: Option<Duration>,
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub struct LatencyMs {
-    pub p50: f64,
-    pub p99: f64,
-    pub max: f64,
-}
-
-impl LatencyMs {
-    /// Of latencies sorted in increasing order.
-    pub fn of(sorted: &[f64]) -> LatencyMs {
-        LatencyMs {
-            p50: percentile(sorted, 0.5),
-            p99: percentile(sorted, 0.99),
-            max: sorted.last().copied().unwrap_or(0.0),
-        }
-    }
 }
 
 /// `--json` keeps these keys.
@@ -125,7 +107,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
 
     let last_tick = world.clock_tick();
     let ticks = last_tick + 1 - first_tick;
-    let (mut latencies, mut agreed, mut complete, mut incomplete) = (Vec::new(), 0u64, 0u64, 0u64);
+    let (mut latencies, mut agreement, mut incomplete) = (Vec::new(), Agreement::default(), 0u64);
     let mut last_incomplete = None;
     for t in first_tick..=last_tick {
         let Some(d) = decisions.get(&t).filter(|d| d.len() == robots) else {
@@ -133,13 +115,10 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
             last_incomplete = Some(t);
             continue;
         };
-        complete += 1;
         let last = d.values().map(|d| d.at).max().expect("robots > 0");
         latencies.push((last - published[&t]).as_secs_f64() * 1e3);
-        let first = d.values().next().expect("robots > 0").class();
-        agreed += u64::from(d.values().all(|d| d.class() == first));
+        agreement.tick(d.values().map(|d| d.class()));
     }
-    latencies.sort_by(f64::total_cmp);
     let n = robots as f64;
     Ok(BenchReport {
         robots,
@@ -147,8 +126,8 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
         routers: o.fleet.routers,
         ticks,
         ticks_per_second: ticks as f64 / elapsed,
-        latency_ms: LatencyMs::of(&latencies),
-        agreement: if complete == 0 { 0.0 } else { agreed as f64 / complete as f64 },
+        latency_ms: LatencyMs::of(latencies),
+        agreement: agreement.share(),
         incomplete_ticks: incomplete,
         router_down_gap_s: router_down_tick.map(|down| {
             let gap_ticks = last_incomplete.filter(|&t| t >= down).map_or(0, |t| t + 1 - down);
@@ -198,7 +177,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=64))]
     pub robots: u64,
     /// How long to measure, after 2 s of warm-up (e.g. 20s).
-    #[arg(long, default_value = "20s", value_parser = crate::demo::parse_duration)]
+    #[arg(long, default_value = "20s", value_parser = crate::durations::parse_duration)]
     pub duration: Duration,
     #[arg(long, default_value = "3", value_parser = crate::world_args::parse_scenario)]
     pub scenario: spwi_world::world::Scenario,
@@ -224,17 +203,17 @@ pub struct BenchArgs {
     /// Kill the first router this long into the measurement (e.g. 10s; needs
     /// --routers 2 or more): its robots move to the next router; reports how long
     /// until all decide again.
-    #[arg(long, value_parser = crate::demo::parse_duration)]
+    #[arg(long, value_parser = crate::durations::parse_duration)]
     pub router_down_at: Option<Duration>,
     /// A soak instead of a measurement: run this long (e.g. 30m) while robots leave,
     /// come back and freeze (see --churn); fails if the fleet did not stay up.
-    #[arg(long, value_parser = crate::demo::parse_duration)]
+    #[arg(long, value_parser = crate::durations::parse_duration)]
     pub soak: Option<Duration>,
     /// In a soak: how often the last robot leaves or comes back.
-    #[arg(long, default_value = "30s", value_parser = crate::demo::parse_duration)]
+    #[arg(long, default_value = "30s", value_parser = crate::durations::parse_duration)]
     pub churn: Duration,
     /// In a soak: how often the robot before it is frozen (SIGSTOP) for 5 s.
-    #[arg(long, default_value = "2m", value_parser = crate::demo::parse_duration)]
+    #[arg(long, default_value = "2m", value_parser = crate::durations::parse_duration)]
     pub freeze_every: Duration,
     /// In a soak: the share of settled ticks that may go undecided (the target is 0).
     #[arg(long, default_value_t = 0.0)]

@@ -34,6 +34,7 @@
 //! Episodes are split 60/20/20 (train/validation/test) by episode index, as in the paper.
 //! `dataset.json` describes every array.
 
+use crate::episodes::episode_seed;
 use crate::npy::NpyWriter;
 use crate::team_floor::{warm_up_seed, TeamFloor};
 use crate::training_mix::TrainingMix;
@@ -46,7 +47,7 @@ use spwi_core::floor::{self, FACING_DIM, RELATION_DIM};
 use spwi_core::graph::{GraphBuilder, NodeFeatures, OnFloor, NODE_FEATURE_DIM};
 use spwi_core::model::{Backend, Gcn};
 use spwi_core::temporal::normalise_keypoints;
-use spwi_proto::{DetectionFrame, RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES};
+use spwi_proto::{DetectionFrame, RobotId, WorkerPhase, EMBEDDING_DIM, KEYPOINT_VALUES, NUM_CLASSES, TICKS_PER_SECOND};
 use spwi_world::generate::NamedLayout;
 use spwi_world::world::{Scenario, World};
 use std::path::{Path, PathBuf};
@@ -101,11 +102,6 @@ fn phase_id(p: WorkerPhase) -> u8 {
         WorkerPhase::Transition => 1,
         WorkerPhase::Stationary => 2,
     }
-}
-
-/// The seed of episode `e` of a dataset seeded `seed` (disjoint across seeds).
-pub fn episode_seed(seed: u64, e: u32) -> u64 {
-    seed.wrapping_mul(1_000_003).wrapping_add(e as u64)
 }
 
 /// Who hears whom through an episode: `hears[listener][speaker]`. Each robot hears a
@@ -387,10 +383,10 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
     let conditions = json!({
         "track_share": o.mix.track_share,
         "warm_share": o.mix.warm_share,
-        "warm_up_max_s": f64::from(o.mix.warm_up_max_ticks) / 10.0,
+        "warm_up_max_s": f64::from(o.mix.warm_up_max_ticks) / f64::from(TICKS_PER_SECOND),
         "drawn": "per episode from its seed (sim/src/training_mix.rs): cameras track the worker with probability track_share, else the floor's own policy; with probability warm_share the fleet first works (0, warm_up_max_s] s on the floor, another worker, and the episode starts from the station maps it built",
         "camera_of_episode": episode_conditions.iter().map(|c| c.camera).collect::<Vec<_>>(),
-        "warm_up_s_of_episode": episode_conditions.iter().map(|c| f64::from(c.warm_up_ticks) / 10.0).collect::<Vec<_>>(),
+        "warm_up_s_of_episode": episode_conditions.iter().map(|c| f64::from(c.warm_up_ticks) / f64::from(TICKS_PER_SECOND)).collect::<Vec<_>>(),
     });
     let mut description = json!({
         "scenario": o.scenario as u8,

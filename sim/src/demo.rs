@@ -4,7 +4,8 @@
 //! sums it up at the end. `--kill-after` / `--join-after` remove and add an agent
 //! while it runs, so membership changes can be watched.
 
-use crate::loopback::{percentile, Hub, InProcessAgent};
+use crate::loopback::{Hub, InProcessAgent};
+use crate::measures::{Agreement, LatencyMs};
 use crate::service::{self, WorldOptions};
 use crate::world_args::WorldArgs;
 use anyhow::{anyhow, Result};
@@ -50,7 +51,8 @@ pub struct Summary {
     /// Share of ticks on which every robot that decided chose the same class.
     pub agreement: f64,
     pub accuracy: Accuracy,
-    pub latency_ms: Latency,
+    /// From the world publishing a tick to a robot publishing its decision for it.
+    pub latency_ms: LatencyMs,
     pub members_changes: Vec<MembersChange>,
     pub messages_per_tick: f64,
     pub bytes_per_tick: f64,
@@ -64,13 +66,6 @@ pub struct Accuracy {
     pub t: f64,
     /// Team forecast for t+h against the true intent at t+h, mean over h = 1..H.
     pub future: f64,
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub struct Latency {
-    /// From the world publishing a tick to a robot publishing its decision for it.
-    pub p50: f64,
-    pub p99: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -225,8 +220,8 @@ fn page_state(o: &Observed, summary: &Summary, scenario: u8, series: &[SeriesPoi
 
 fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bool) -> Summary {
     let mut decisions: BTreeMap<String, u64> = BTreeMap::new();
-    let (mut agree, mut compared, mut correct, mut judged, mut fut_ok, mut fut_n) =
-        (0u64, 0u64, 0u64, 0u64, 0u64, 0u64);
+    let mut agreement = Agreement::default();
+    let (mut correct, mut judged, mut fut_ok, mut fut_n) = (0u64, 0u64, 0u64, 0u64);
     let mut latencies = Vec::new();
     for (tick, by) in &o.decisions {
         for (r, (_, at)) in by {
@@ -235,9 +230,7 @@ fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bo
                 latencies.push(at.saturating_duration_since(*t0).as_secs_f64() * 1e3);
             }
         }
-        let classes: Vec<Option<Station>> = by.values().map(|(d, _)| d.steps.first().map(|s| s.class)).collect();
-        compared += 1;
-        agree += u64::from(classes.windows(2).all(|w| w[0] == w[1]));
+        agreement.tick(by.values().map(|(d, _)| d.steps.first().map(|s| s.class)));
         // the team's answer: the first robot's decision (they agree on nearly every tick)
         let Some((d, _)) = by.values().next() else { continue };
         if let (Some(step), Some((truth, _))) = (d.steps.first(), o.truth.get(tick)) {
@@ -251,16 +244,15 @@ fn summarise(o: &Observed, robots: usize, changes: &[MembersChange], fixture: bo
             }
         }
     }
-    latencies.sort_by(f64::total_cmp);
     let ticks = o.truth.len().max(1) as f64;
     let ratio = |a: u64, b: u64| if b == 0 { 0.0 } else { a as f64 / b as f64 };
     Summary {
         robots,
         ticks: o.truth.len() as u64,
         decisions,
-        agreement: ratio(agree, compared),
+        agreement: agreement.share(),
         accuracy: Accuracy { t: ratio(correct, judged), future: ratio(fut_ok, fut_n) },
-        latency_ms: Latency { p50: percentile(&latencies, 0.5), p99: percentile(&latencies, 0.99) },
+        latency_ms: LatencyMs::of(latencies),
         members_changes: changes.to_vec(),
         messages_per_tick: o.messages as f64 / ticks,
         bytes_per_tick: o.bytes as f64 / ticks,
@@ -451,22 +443,6 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
     Ok(summarise(&o, opts.robots, &changes, models.manifest.fixture))
 }
 
-/// Parses durations like `60s`, `2m`, `500ms` or a bare number of seconds.
-pub fn parse_duration(s: &str) -> Result<Duration, String> {
-    let (num, unit) = s.find(|c: char| c.is_ascii_alphabetic()).map_or((s, "s"), |i| s.split_at(i));
-    let v: f64 = num.trim().parse().map_err(|_| format!("{s:?} is not a duration (e.g. 60s, 2m, 500ms)"))?;
-    let secs = match unit {
-        "ms" => v / 1000.0,
-        "s" => v,
-        "m" => v * 60.0,
-        _ => return Err(format!("{s:?}: unknown unit {unit:?} (ms, s, m)")),
-    };
-    if !(secs.is_finite() && (0.0..=86_400.0).contains(&secs)) {
-        return Err(format!("{s:?}: must be within 0 s and 24 h"));
-    }
-    Ok(Duration::from_secs_f64(secs))
-}
-
 /// The arguments of `spwi-sim demo`.
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
@@ -477,13 +453,13 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// How long to run (e.g. 60s, 2m).
-    #[arg(long, default_value = "60s", value_parser = crate::demo::parse_duration)]
+    #[arg(long, default_value = "60s", value_parser = crate::durations::parse_duration)]
     pub duration: Duration,
     /// Stop one agent after this long, to watch the fleet shrink.
-    #[arg(long, value_parser = crate::demo::parse_duration)]
+    #[arg(long, value_parser = crate::durations::parse_duration)]
     pub kill_after: Option<Duration>,
     /// Start one more agent after this long, to watch it join.
-    #[arg(long, value_parser = crate::demo::parse_duration)]
+    #[arg(long, value_parser = crate::durations::parse_duration)]
     pub join_after: Option<Duration>,
     /// Model set folder (default: the agent's default).
     #[arg(long)]
@@ -505,7 +481,7 @@ pub fn main(a: DemoArgs) -> Result<()> {
     init_tracing(LogFormat::Human);
     let mut agent = spwi_agent::config::AgentConfig::load(None)?;
     if let Some(m) = models {
-        agent.models.dir = m;
+        agent.models.dir = Some(m);
     }
     let set = spwi_agent::daemon::load_models(&agent)?;
     let opts = crate::demo::DemoOptions {
@@ -538,16 +514,6 @@ pub fn main(a: DemoArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn durations() {
-        assert_eq!(parse_duration("60s"), Ok(Duration::from_secs(60)));
-        assert_eq!(parse_duration("2m"), Ok(Duration::from_secs(120)));
-        assert_eq!(parse_duration("500ms"), Ok(Duration::from_millis(500)));
-        assert_eq!(parse_duration("3"), Ok(Duration::from_secs(3)));
-        assert!(parse_duration("soon").is_err());
-        assert!(parse_duration("5h").is_err());
-    }
 
     #[test]
     fn a_robot_that_did_not_vote_this_tick_is_shown_with_its_last_vote_and_its_age() {

@@ -18,6 +18,9 @@
 //! demo.rs       `spwi-sim demo`: world + N agents in one process, live view, summary
 //! demo_web.rs   the demo's live page (HTML shipped in the binary, server-sent events)
 //! world_args.rs the world every tool runs in (scenario, floors, cameras)
+//! measures.rs   agreement and latency, counted the same way by every tool
+//! durations.rs  "20s", "2m", "500ms" on the command line
+//! episodes.rs   the world seed of each episode of a run
 //! team_floor.rs every robot's floor view when each hears every other; warm maps
 //! training_mix.rs the cameras and warm-ups of a training export's episodes
 //! layout.rs     `spwi-sim layout`: a generated or mirrored floor to a TOML file
@@ -29,10 +32,13 @@ pub mod cli;
 pub mod dataset;
 pub mod demo;
 pub mod demo_web;
+pub mod durations;
+pub mod episodes;
 pub mod eval;
 pub mod faulty_camera;
 pub mod layout;
 pub mod loopback;
+pub mod measures;
 pub mod npy;
 pub mod progress;
 pub mod render;

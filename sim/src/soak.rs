@@ -15,8 +15,8 @@
 //! minute, so a long run tells growth that levels off (warm-up, the allocator's
 //! arenas) from growth that does not (a leak).
 
-use crate::bench::LatencyMs;
 use crate::loopback::{layout_with_slots, FleetOptions, LoopbackFleet, Usage};
+use crate::measures::{Agreement, LatencyMs};
 use anyhow::{bail, Result};
 use serde::Serialize;
 use spwi_proto::{RobotId, TICK_PERIOD};
@@ -216,7 +216,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
         false_removals: 0,
         ghost_members: 0,
         agreement: 0.0,
-        latency_ms: LatencyMs::of(&[]),
+        latency_ms: LatencyMs::default(),
         rss_mb_start: mean_rss(&at_start),
         rss_mb_end: mean_rss(&at_end),
         rss_growth_max: largest_growth(&at_start, &at_end, |u| u.rss_mb),
@@ -227,7 +227,7 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
         open_files_start: at_start.iter().map(|u| u.open_files).sum(),
         open_files_end: at_end.iter().map(|u| u.open_files).sum(),
     };
-    let (mut agreed, mut complete, mut latencies) = (0u64, 0u64, Vec::new());
+    let (mut agreement, mut latencies) = (Agreement::default(), Vec::new());
     let (mut churning_live, mut frozen) = (true, false);
     let mut pending = events.iter().peekable();
     for t in first_tick..=last_tick {
@@ -262,14 +262,12 @@ pub async fn run(o: &SoakOptions) -> Result<SoakReport> {
         let live = expected.len() as u32;
         report.false_removals += u64::from(got.iter().any(|d| d.msg.live_members < live));
         report.ghost_members += u64::from(got.iter().any(|d| d.msg.live_members > live));
-        complete += 1;
-        agreed += u64::from(got.iter().all(|d| d.class() == got[0].class()));
+        agreement.tick(got.iter().map(|d| d.class()));
         let last = got.iter().map(|d| d.at).max().expect("at least one robot expected");
         latencies.push((last - published[&t]).as_secs_f64() * 1e3);
     }
-    latencies.sort_by(f64::total_cmp);
-    report.agreement = if complete == 0 { 0.0 } else { agreed as f64 / complete as f64 };
-    report.latency_ms = LatencyMs::of(&latencies);
+    report.agreement = agreement.share();
+    report.latency_ms = LatencyMs::of(latencies);
     Ok(report)
 }
 

@@ -22,7 +22,7 @@ async fn a_short_headless_demo_reports_every_robot_and_the_churn() {
             join_after: Some(Duration::from_secs(4)),
             layout: Layout::default_layout(),
             agent: spwi_agent::config::AgentConfig {
-                models: spwi_agent::config::ModelsConfig { dir: models_dir(), ..Default::default() },
+                models: spwi_agent::config::ModelsConfig { dir: Some(models_dir()), ..Default::default() },
                 ..Default::default()
             },
             view: false,

@@ -52,7 +52,7 @@ async fn the_live_page_renders_the_robots_and_updates() {
             join_after: None,
             layout: Layout::default_layout(),
             agent: spwi_agent::config::AgentConfig {
-                models: spwi_agent::config::ModelsConfig { dir: models_dir(), ..Default::default() },
+                models: spwi_agent::config::ModelsConfig { dir: Some(models_dir()), ..Default::default() },
                 ..Default::default()
             },
             view: false,

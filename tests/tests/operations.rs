@@ -179,3 +179,36 @@ async fn an_agent_that_cannot_start_says_why_even_with_its_warnings_hidden() {
         assert!(why.contains(&missing.join("manifest.json").display().to_string()), "{why}");
     });
 }
+
+/// Started anywhere, with no model set named, an agent finds the one copied beside the
+/// folder it runs in (the first place it looks, before an installed one and the source
+/// tree), and decides with it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_agent_started_elsewhere_finds_the_model_set_copied_there() {
+    within!(60, "test", async {
+        let _serial = serial().await;
+        let hub = Hub::start("elsewhere").await.unwrap();
+        let robot = id("e0");
+        let place = std::env::temp_dir().join(format!("spwi-elsewhere-{}", std::process::id()));
+        let set = place.join("models/default");
+        std::fs::create_dir_all(&set).unwrap();
+        for f in std::fs::read_dir(models_dir()).unwrap() {
+            let f = f.unwrap().path();
+            std::fs::copy(&f, set.join(f.file_name().unwrap())).unwrap();
+        }
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let mut command = std::process::Command::new(EXE);
+        command.current_dir(&place).env_remove("SPWI_MODELS_DIR").args(["--http", &format!("127.0.0.1:{port}")]);
+        let collector = hub.decisions().await.unwrap();
+        let _agent = AgentProcess::spawn(command, Launch::new(&hub, &robot)).unwrap();
+        let _publisher = Publisher::start(&hub, vec![robot.clone()], Duration::from_millis(100));
+        collector.wait_members(std::slice::from_ref(&robot), 1, Instant::now(), Duration::from_secs(20)).await.unwrap();
+        let addr = std::net::SocketAddr::from(([127, 0, 0, 1], port));
+        let (code, body) = tokio::task::spawn_blocking(move || get(addr, "/status")).await.unwrap();
+        assert_eq!(code, 200);
+        let status: serde_json::Value = serde_json::from_str(&body).unwrap();
+        assert_eq!(status["fixture_models"], true, "the copy (the fixture set), not the shipped default: {body}");
+        assert!(status["last_decision"]["tick"].as_u64().is_some(), "it decides: {body}");
+        std::fs::remove_dir_all(&place).unwrap();
+    });
+}

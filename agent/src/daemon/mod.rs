@@ -30,7 +30,7 @@ use log::RateLimitedLog;
 use publishing::Outbox;
 use spwi_core::clock::FleetClock;
 use spwi_core::engine::{Engine, EngineConfig, Input, Output};
-use spwi_core::model::ModelSet;
+use spwi_core::model::{locate, ModelSet};
 use spwi_proto::*;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
@@ -52,7 +52,8 @@ pub struct Options {
 
 /// Loads the model set named by the config.
 pub fn load_models(cfg: &AgentConfig) -> Result<Arc<ModelSet>> {
-    let set = ModelSet::load(&cfg.models.dir, cfg.models.backend, cfg.models.ort_library.as_deref())?;
+    let dir = locate::model_set(cfg.models.dir.as_deref(), locate::DEFAULT_SET)?;
+    let set = ModelSet::load(&dir, cfg.models.backend, cfg.models.ort_library.as_deref())?;
     if set.manifest.fixture {
         tracing::warn!(dir = %set.dir.display(), "running FIXTURE models (random weights): decisions are plumbing tests, not predictions");
     }

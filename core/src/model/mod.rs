@@ -6,6 +6,7 @@
 //! - `ort`: ONNX Runtime, loaded at run time from the `onnxruntime` wheel's shared
 //!   library (cargo feature `ort`), so nothing is downloaded at build time.
 
+pub mod locate;
 #[cfg(feature = "ort")]
 mod ort;
 mod tract;

@@ -137,10 +137,10 @@ pub fn main(a: EvalArgs) -> Result<()> {
         }
         None => Default::default(),
     };
-    let root = std::path::Path::new("models");
+    let root = spwi_core::model::locate::sets_folder(spwi_core::model::locate::DEFAULT_SET)?;
     if all {
         let settings = crate::eval::studies::Settings {
-            models_root: root.to_owned(),
+            models_root: root.clone(),
             floors,
             floors_name: world.describe(),
             camera: world.camera,
@@ -172,7 +172,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
                 command += &format!(" --plots {}", d.display());
                 d.strip_prefix(page_dir).map(|p| p.to_owned()).unwrap_or_else(|_| d.clone())
             });
-            let page = crate::eval::studies::markdown(&studies, &command, &settings, figures.as_deref());
+            let page = crate::eval::page::markdown(&studies, &command, &settings, figures.as_deref());
             std::fs::write(&path, page)?;
             println!("wrote {}", path.display());
         }
@@ -180,7 +180,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
     }
     let dir = match models {
         Some(d) => d,
-        None => crate::eval::find_model_set(root, window, horizon, frames)?,
+        None => crate::eval::find_model_set(&root, window, horizon, frames)?,
     };
     let models = spwi_core::model::ModelSet::load(&dir, spwi_core::model::Backend::Tract, None)?;
     let report = crate::eval::run(&crate::eval::EvalOptions {
@@ -203,7 +203,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
             delay_ms: delay,
         },
         tick,
-        warm_map_ticks: warm_map * 10,
+        warm_map_ticks: warm_map * spwi_proto::TICKS_PER_SECOND,
         cnn1d: true,
     })?;
     crate::eval::print(&report);

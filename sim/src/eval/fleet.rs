@@ -11,6 +11,7 @@ use super::observers::{Observers, Predictions};
 use super::score::{confuse, Confusion, Tally};
 use super::EvalOptions;
 use crate::faulty_camera::{LoopingCamera, StuckCamera};
+use crate::measures::Agreement;
 use anyhow::Result;
 use spwi_core::engine::{Engine, EngineConfig, Input, Output};
 use spwi_core::temporal::TemporalModel;
@@ -26,6 +27,14 @@ use std::time::Duration;
 const TICK: Duration = spwi_proto::TICK_PERIOD;
 /// Ticks into an episode after which `consensus_settled` scores (10 s).
 pub const SETTLED_TICKS: usize = 100;
+
+/// One robot's own models, tallied.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RobotTallies {
+    pub gnn: Tally,
+    pub ego: Tally,
+    pub collective: Tally,
+}
 
 /// Tallies of one or more episodes.
 #[derive(Debug, Clone, Default)]
@@ -57,17 +66,17 @@ pub struct Tallies {
     pub by_phase: [PhaseTallies; Phase::ALL.len()],
     /// The long walks ([`Phase::Later`]) by the straight line to their goal ([`Route`]).
     pub long_walks: [PhaseTallies; Route::ALL.len()],
-    /// Per robot slot: gnn, ego, collective.
-    pub per_robot: Vec<[Tally; 3]>,
+    /// Per robot slot, its own models.
+    pub per_robot: Vec<RobotTallies>,
     /// Per robot slot: the sum over its votes of the trust the other robots held of it,
     /// and the number of its votes.
     pub vote_trust: Vec<(f64, u64)>,
     pub confusion_ego: Confusion,
     pub confusion_collective: Confusion,
-    /// Ticks on which some robot decided something, and how many of them every live
-    /// robot decided the same class for t.
+    /// Ticks on which some robot decided something.
     pub decided_ticks: u64,
-    pub agreed_ticks: u64,
+    /// Of those, the ticks on which every live robot decided the same class for t.
+    pub agreement: Agreement,
     /// Ticks evaluated.
     pub ticks: u64,
     /// Robot frames processed.
@@ -109,9 +118,9 @@ impl Tallies {
             self.per_robot.resize(o.per_robot.len(), Default::default());
         }
         for (a, b) in self.per_robot.iter_mut().zip(&o.per_robot) {
-            for (x, y) in a.iter_mut().zip(b) {
-                x.merge(y);
-            }
+            a.gnn.merge(&b.gnn);
+            a.ego.merge(&b.ego);
+            a.collective.merge(&b.collective);
         }
         if self.vote_trust.len() < o.vote_trust.len() {
             self.vote_trust.resize(o.vote_trust.len(), (0.0, 0));
@@ -130,7 +139,7 @@ impl Tallies {
             }
         }
         self.decided_ticks += o.decided_ticks;
-        self.agreed_ticks += o.agreed_ticks;
+        self.agreement += o.agreement;
         self.ticks += o.ticks;
         self.frames += o.frames;
         self.messages += o.messages;
@@ -501,14 +510,14 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             let pr = &mut tallies.per_robot[*slot];
             if let Some(g) = p.gnn {
                 tallies.gnn.add(&[g], truth);
-                pr[0].add(&[g], truth);
+                pr.gnn.add(&[g], truth);
             }
             if let Some(e) = &p.ego {
                 tallies.ego.add(e, truth);
                 if close {
                     tallies.close_pair.ego.add(e, truth);
                 }
-                pr[1].add(e, truth);
+                pr.ego.add(e, truth);
                 confuse(&mut tallies.confusion_ego, e[0], truth[0]);
             }
             if let Some(c) = &p.collective {
@@ -526,7 +535,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                 if !p.mapped(truth[0]) {
                     tallies.collective_goal_unmapped.add(c, truth);
                 }
-                pr[2].add(c, truth);
+                pr.collective.add(c, truth);
                 confuse(&mut tallies.confusion_collective, c[0], truth[0]);
             }
             if let Some(c) = &p.cnn1d {
@@ -556,8 +565,8 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let decided: Vec<&Vec<Station>> = rec.decisions.iter().filter(|d| !d.is_empty()).collect();
         if !decided.is_empty() {
             tallies.decided_ticks += 1;
-            let all_same = decided.len() == rec.decisions.len() && decided.iter().all(|d| d[0] == decided[0][0]);
-            tallies.agreed_ticks += u64::from(all_same);
+            // A live robot that decided nothing disagrees.
+            tallies.agreement.tick(rec.decisions.iter().map(|d| d.first()));
             for d in decided {
                 tallies.consensus.add(d, truth);
                 if t >= SETTLED_TICKS {

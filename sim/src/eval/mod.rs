@@ -6,7 +6,8 @@
 //! - `bus.rs`: the engines' network (delay, loss, leaving robots), deadlines as polls;
 //! - `observers.rs`: the ego-GRU and the baselines; `cvm.rs`: the constant-velocity model;
 //! - `fleet.rs`: one episode — the world's frames in, the engines' votes and decisions scored;
-//! - `score.rs`: tallies, accuracies and their intervals; `studies.rs`: `--all` and docs/RESULTS.md,
+//! - `score.rs`: tallies, accuracies and their intervals; `studies.rs`: the runs of `--all`;
+//!   `page.rs`: docs/RESULTS.md from them, `figures.rs`: how a figure reads there,
 //!   `reading.rs`: that page's reading of the targets and of what bounds them;
 //! - `command.rs`: the command line of `spwi-sim eval`;
 //!   `plots.rs`: the PNG figures of `--plots`.
@@ -22,16 +23,20 @@
 pub mod bus;
 pub mod command;
 pub mod cvm;
+mod figures;
 pub mod fleet;
 pub mod observers;
+pub mod page;
 pub mod plots;
 pub mod reading;
 pub mod score;
+pub mod scored;
 pub mod studies;
 
-use crate::dataset::episode_seed;
+use crate::episodes::episode_seed;
 use anyhow::{bail, Context, Result};
 use score::{estimate, Accuracy, Confusion, Tally};
+pub use scored::Scored;
 use serde::Serialize;
 use spwi_core::manifest::Manifest;
 use spwi_core::model::ModelSet;
@@ -146,7 +151,8 @@ pub struct PerRobot {
 /// Every figure of one evaluation; `--json` writes it as is.
 #[derive(Debug, Clone, Serialize)]
 pub struct Report {
-    pub scenario: u8,
+    #[serde(serialize_with = "scenario_number")]
+    pub scenario: Scenario,
     pub robots: usize,
     pub window: usize,
     pub frames: usize,
@@ -166,10 +172,10 @@ pub struct Report {
     /// ticks some robot decided), team_all_ticks (the same decision over every tick, no
     /// decision counting as wrong), cvm, cnn1d. Each model is scored on the ticks where
     /// it predicts: a robot's models when it sees the worker.
-    pub models: BTreeMap<&'static str, Accuracy>,
+    pub models: BTreeMap<Scored, Accuracy>,
     /// The same models on the ticks where the worker heads to a station of a close
     /// pair (work spots within 3.5 m); absent when no floor has one.
-    pub close_pair: BTreeMap<&'static str, Accuracy>,
+    pub close_pair: BTreeMap<Scored, Accuracy>,
     /// The collective, the ego and the CVM by where the tick falls in the worker's
     /// cycle: at work, or walking so long after committing to its goal.
     pub by_phase: Vec<PhaseAccuracy>,
@@ -187,7 +193,7 @@ pub struct Report {
     pub messages_per_robot_tick: f64,
     pub bytes_per_robot_tick: f64,
     /// Rows: true class; columns: predicted class (at t).
-    pub confusion: BTreeMap<&'static str, Confusion>,
+    pub confusion: BTreeMap<Scored, Confusion>,
     /// Predictions at t scored for the collective GRU (robot-ticks seeing the worker).
     pub samples: u64,
     /// Share of those on which the goal at t was missing from the robot's team map.
@@ -290,28 +296,28 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     let of = |f: &dyn Fn(&fleet::Tallies) -> &Tally| estimate(&episodes.iter().map(|e| *f(e)).collect::<Vec<_>>());
     let m = &o.models.manifest;
     let mut models = BTreeMap::new();
-    models.insert("gnn", of(&|e| &e.gnn));
-    models.insert("ego", of(&|e| &e.ego));
-    models.insert("collective", of(&|e| &e.collective));
-    models.insert("healthy_collective", of(&|e| &e.healthy_collective));
-    models.insert("consensus", of(&|e| &e.consensus));
-    models.insert("consensus_settled", of(&|e| &e.consensus_settled));
-    models.insert("team_all_ticks", of(&|e| &e.team_all_ticks));
-    models.insert("cvm", of(&|e| &e.cvm));
-    models.insert("cvm_mapped", of(&|e| &e.cvm_mapped));
-    models.insert("collective_goal_unmapped", of(&|e| &e.collective_goal_unmapped));
+    models.insert(Scored::Gnn, of(&|e| &e.gnn));
+    models.insert(Scored::Ego, of(&|e| &e.ego));
+    models.insert(Scored::Collective, of(&|e| &e.collective));
+    models.insert(Scored::HealthyCollective, of(&|e| &e.healthy_collective));
+    models.insert(Scored::Consensus, of(&|e| &e.consensus));
+    models.insert(Scored::ConsensusSettled, of(&|e| &e.consensus_settled));
+    models.insert(Scored::TeamAllTicks, of(&|e| &e.team_all_ticks));
+    models.insert(Scored::Cvm, of(&|e| &e.cvm));
+    models.insert(Scored::CvmMapped, of(&|e| &e.cvm_mapped));
+    models.insert(Scored::CollectiveGoalUnmapped, of(&|e| &e.collective_goal_unmapped));
     if o.cnn1d && m.models.cnn1d.is_some() {
-        models.insert("cnn1d", of(&|e| &e.cnn1d));
+        models.insert(Scored::Cnn1d, of(&|e| &e.cnn1d));
     }
     let mut close_pair = BTreeMap::new();
     if all.close_pair.team_all_ticks.samples() > 0 {
-        close_pair.insert("ego", of(&|e| &e.close_pair.ego));
-        close_pair.insert("collective", of(&|e| &e.close_pair.collective));
-        close_pair.insert("consensus", of(&|e| &e.close_pair.consensus));
-        close_pair.insert("team_all_ticks", of(&|e| &e.close_pair.team_all_ticks));
-        close_pair.insert("cvm", of(&|e| &e.close_pair.cvm));
-        close_pair.insert("collective_farther", of(&|e| &e.close_pair.farther_collective));
-        close_pair.insert("cvm_farther", of(&|e| &e.close_pair.farther_cvm));
+        close_pair.insert(Scored::Ego, of(&|e| &e.close_pair.ego));
+        close_pair.insert(Scored::Collective, of(&|e| &e.close_pair.collective));
+        close_pair.insert(Scored::Consensus, of(&|e| &e.close_pair.consensus));
+        close_pair.insert(Scored::TeamAllTicks, of(&|e| &e.close_pair.team_all_ticks));
+        close_pair.insert(Scored::Cvm, of(&|e| &e.close_pair.cvm));
+        close_pair.insert(Scored::CollectiveFarther, of(&|e| &e.close_pair.farther_collective));
+        close_pair.insert(Scored::CvmFarther, of(&|e| &e.close_pair.farther_cvm));
     }
     // Ticks of one kind (`pick` finds its tallies among an episode's), `share` of `of_ticks`.
     let kind =
@@ -329,14 +335,20 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         fleet::Route::ALL.iter().map(|&r| kind(r.name(), long_walk_ticks, &|e| &e.long_walks[r as usize])).collect();
     let per_robot = (0..all.per_robot.len())
         .map(|slot| {
-            let model = |k: usize| of(&|e| e.per_robot.get(slot).map_or(&EMPTY, |r| &r[k]));
+            let model = |pick: fn(&fleet::RobotTallies) -> &Tally| of(&|e| e.per_robot.get(slot).map_or(&EMPTY, pick));
             let (sum, votes) = all.vote_trust.get(slot).copied().unwrap_or_default();
             let trust = (votes > 0).then(|| sum / votes as f64);
-            PerRobot { robot: format!("r{slot}"), trust, gnn: model(0).t, ego: model(1), collective: model(2) }
+            PerRobot {
+                robot: format!("r{slot}"),
+                trust,
+                gnn: model(|r| &r.gnn).t,
+                ego: model(|r| &r.ego),
+                collective: model(|r| &r.collective),
+            }
         })
         .collect();
     Ok(Report {
-        scenario: o.scenario as u8,
+        scenario: o.scenario,
         robots: o.robots,
         window: m.window,
         frames: m.frames(),
@@ -349,17 +361,17 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         cameras: shared_camera_policy(&o.floors),
         faults: o.faults.clone(),
         tick: o.tick.clone(),
-        warm_map_s: f64::from(o.warm_map_ticks) / 10.0,
+        warm_map_s: f64::from(o.warm_map_ticks) / f64::from(spwi_proto::TICKS_PER_SECOND),
         models,
         close_pair,
         by_phase,
         long_walks,
         per_robot,
-        agreement: if all.decided_ticks == 0 { 0.0 } else { all.agreed_ticks as f64 / all.decided_ticks as f64 },
+        agreement: all.agreement.share(),
         coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
         messages_per_robot_tick: all.messages as f64 / all.frames.max(1) as f64,
         bytes_per_robot_tick: all.bytes as f64 / all.frames.max(1) as f64,
-        confusion: BTreeMap::from([("ego", all.confusion_ego), ("collective", all.confusion_collective)]),
+        confusion: BTreeMap::from([(Scored::Ego, all.confusion_ego), (Scored::Collective, all.confusion_collective)]),
         samples: all.collective.samples(),
         goal_unmapped_share: all.collective_goal_unmapped.samples() as f64 / all.collective.samples().max(1) as f64,
         map: placements(&all.map),
@@ -369,6 +381,11 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
 }
 
 static EMPTY: Tally = Tally::EMPTY;
+
+/// A scenario as the JSON names it: by its number, as the paper does.
+fn scenario_number<S: serde::Serializer>(s: &Scenario, ser: S) -> Result<S::Ok, S::Error> {
+    ser.serialize_u8(*s as u8)
+}
 
 /// Every episode's tallies, in episode order, computed on every core.
 fn run_episodes(o: &EvalOptions) -> Result<Vec<fleet::Tallies>> {
@@ -437,7 +454,7 @@ pub fn print(r: &Report) {
     let pct = |v: f64| format!("{:5.1}", 100.0 * v);
     println!(
         "scenario {} · {} robots · {} ticks ({} frames) → {} ahead · model set {} · floors {} · {} episodes × {} ticks, seed {}",
-        r.scenario,
+        r.scenario as u8,
         r.robots,
         r.window,
         r.frames,
@@ -470,19 +487,8 @@ pub fn print(r: &Report) {
         _ => "–".into(),
     };
     println!("  {:<15} {:>21} {:>21}   (95 % CI by episode)", "model", "at t %", "t+1..H %");
-    for name in [
-        "team_all_ticks",
-        "gnn",
-        "ego",
-        "collective",
-        "consensus",
-        "consensus_settled",
-        "cvm",
-        "cvm_mapped",
-        "cnn1d",
-        "collective_goal_unmapped",
-    ] {
-        if let Some(a) = r.models.get(name) {
+    for name in Scored::LISTED.into_iter().chain([Scored::ConsensusSettled, Scored::CollectiveGoalUnmapped]) {
+        if let Some(a) = r.models.get(&name) {
             println!("  {:<15} {:>21} {:>21}", name, ci(a), ci_future(a));
         }
     }
@@ -588,8 +594,8 @@ mod tests {
         let b = run(&options(m, faults)).unwrap();
         assert_eq!(without_timings(&a), without_timings(&b));
         assert!(a.samples > 0, "some robot saw the worker");
-        for key in ["gnn", "ego", "collective", "consensus", "cvm"] {
-            let acc = a.models[key];
+        for key in [Scored::Gnn, Scored::Ego, Scored::Collective, Scored::Consensus, Scored::Cvm] {
+            let acc = a.models[&key];
             assert!((0.0..=1.0).contains(&acc.t), "{key}: {acc:?}");
         }
         assert_eq!(a.per_robot.len(), 3);
@@ -602,7 +608,7 @@ mod tests {
         let set = ModelSet::load(&dir, Backend::Tract, None).unwrap();
         let with = run(&EvalOptions { episodes: 1, ..options(set.clone(), Faults::none()) }).unwrap();
         let without = run(&EvalOptions { episodes: 1, cnn1d: false, ..options(set, Faults::none()) }).unwrap();
-        assert!(with.models.contains_key("cnn1d") && !without.models.contains_key("cnn1d"));
+        assert!(with.models.contains_key(&Scored::Cnn1d) && !without.models.contains_key(&Scored::Cnn1d));
         let mut with = without_timings(&with);
         with["models"].as_object_mut().unwrap().remove("cnn1d");
         assert_eq!(with, without_timings(&without));
@@ -652,7 +658,7 @@ mod tests {
             warm_maps: vec![warm],
             fresh: Vec::new(),
         };
-        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        let page = page::markdown(&st, "spwi-sim eval --all", &settings, None);
         let rows: Vec<&str> = page.lines().filter(|l| l.starts_with("| test | 3 |")).collect();
         assert_eq!(rows.len(), 2, "{page}");
         assert!(rows[0].contains("| empty |") && rows[1].contains("| warm, 30 s |"), "{rows:?}");
@@ -662,7 +668,7 @@ mod tests {
         for r in st.generalisation.iter_mut().chain(st.warm_maps.iter_mut()) {
             r.floors = studies::with_cameras(studies::HELDOUT_FLOORS, CameraPolicy::Fixed);
         }
-        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        let page = page::markdown(&st, "spwi-sim eval --all", &settings, None);
         for maps in ["empty", "warm, 30 s"] {
             let row = format!("| collective − CVM at t | ≥ +10 pts | fixed | {maps} |");
             assert!(page.contains(&row), "no row {row:?} in\n{page}");
@@ -678,14 +684,14 @@ mod tests {
             .filter(|cell| cell.contains(" / ") && cell.contains('('))
             .map(|cell| cell.split(' ').next().unwrap().parse::<f64>().unwrap())
             .sum();
-        assert!((lost - 100.0 * (1.0 - cold.models["collective"].t)).abs() < 0.3, "{lost} in {bounds}");
+        assert!((lost - 100.0 * (1.0 - cold.models[&Scored::Collective].t)).abs() < 0.3, "{lost} in {bounds}");
         let missed = page.contains("- **Collective − CVM ≥ +10** (missed in 2 of 2 settings)");
-        assert_eq!(missed, cold.models["collective"].t < cold.models["cvm"].t + 0.10, "{page}");
+        assert_eq!(missed, cold.models[&Scored::Collective].t < cold.models[&Scored::Cvm].t + 0.10, "{page}");
         let mut leading = st.clone();
         for r in leading.generalisation.iter_mut().chain(leading.warm_maps.iter_mut()) {
-            r.models.get_mut("collective").unwrap().t = r.models["cvm"].t + 0.2;
+            r.models.get_mut(&Scored::Collective).unwrap().t = r.models[&Scored::Cvm].t + 0.2;
         }
-        let page_leading = studies::markdown(&leading, "spwi-sim eval --all", &settings, None);
+        let page_leading = page::markdown(&leading, "spwi-sim eval --all", &settings, None);
         assert!(!page_leading.contains("- **Collective − CVM ≥ +10**"), "met: no paragraph\n{page_leading}");
 
         // Where the fresh sample ran, its run follows its twin and every target read
@@ -693,9 +699,9 @@ mod tests {
         let mut fresh = st.generalisation[0].clone();
         fresh.floors = studies::with_cameras(studies::FRESH_FLOORS, CameraPolicy::Fixed);
         fresh.seed += studies::FRESH_SEED_OFFSET;
-        fresh.models.get_mut("collective").unwrap().t = fresh.models["cvm"].t + 0.123;
+        fresh.models.get_mut(&Scored::Collective).unwrap().t = fresh.models[&Scored::Cvm].t + 0.123;
         st.fresh.push(fresh);
-        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        let page = page::markdown(&st, "spwi-sim eval --all", &settings, None);
         let seeds = [" | 5 | ".to_owned(), format!(" | {} | ", 5 + studies::FRESH_SEED_OFFSET)];
         let section: Vec<&str> =
             page.lines().filter(|l| l.starts_with("| heldout:") && seeds.iter().any(|s| l.contains(s))).collect();
@@ -718,12 +724,12 @@ mod tests {
         let tracked = |mut r: Report, floors: &str, collective: f64| {
             r.floors = studies::with_cameras(floors, CameraPolicy::Track);
             r.cameras = Some(CameraPolicy::Track);
-            r.models.get_mut("collective").unwrap().t = collective;
+            r.models.get_mut(&Scored::Collective).unwrap().t = collective;
             r
         };
         st.generalisation.push(tracked(heldout, studies::HELDOUT_FLOORS, 0.85));
-        st.generalisation.push(tracked(moved, "factory-moved.toml", 0.81));
-        let page = studies::markdown(&st, "spwi-sim eval --all", &settings, None);
+        st.generalisation.push(tracked(moved, studies::MOVED_FLOORS, 0.81));
+        let page = page::markdown(&st, "spwi-sim eval --all", &settings, None);
         let moved: Vec<&str> = page.lines().filter(|l| l.starts_with("| collective at t on factory-moved")).collect();
         assert_eq!(moved.len(), 1, "{page}");
         assert!(
@@ -741,7 +747,11 @@ mod tests {
         // Each phase's share of the collective's predictions weighs its accuracy into the whole.
         assert!((r.by_phase.iter().map(|p| p.collective_share).sum::<f64>() - 1.0).abs() < 1e-9);
         let weighed: f64 = r.by_phase.iter().map(|p| p.collective_share * p.collective.t).sum();
-        assert!((weighed - r.models["collective"].t).abs() < 1e-9, "{weighed} vs {}", r.models["collective"].t);
+        assert!(
+            (weighed - r.models[&Scored::Collective].t).abs() < 1e-9,
+            "{weighed} vs {}",
+            r.models[&Scored::Collective].t
+        );
         assert_eq!(r.long_walks.len(), fleet::Route::ALL.len());
         assert!((r.long_walks.iter().map(|p| p.share).sum::<f64>() - 1.0).abs() < 1e-9, "{:?}", r.long_walks);
         // The worker standing at its station shows its intent; one that has just left

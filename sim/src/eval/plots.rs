@@ -6,10 +6,12 @@
 //! font is read from `SPWI_FONT` or Debian's DejaVu Sans (package fonts-dejavu-core).
 
 use super::score::Confusion;
+use super::scored::Scored;
 use super::studies::Studies;
 use super::Report;
 use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
+use spwi_world::world::Scenario;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -124,8 +126,8 @@ pub fn confusion(path: &Path, title: &str, c: &Confusion) -> Result<()> {
     Ok(())
 }
 
-fn pct(r: &Report, model: &str, future: bool) -> f64 {
-    r.models.get(model).map_or(0.0, |a| 100.0 * if future { a.future.unwrap_or(0.0) } else { a.t })
+fn pct(r: &Report, model: Scored, future: bool) -> f64 {
+    r.models.get(&model).map_or(0.0, |a| 100.0 * if future { a.future.unwrap_or(0.0) } else { a.t })
 }
 
 /// Every figure of `--all` into `dir`; returns the files written.
@@ -142,11 +144,11 @@ pub fn write_all(st: &Studies, dir: &Path) -> Result<Vec<PathBuf>> {
         "robots",
         (0.5, 8.5),
         &[
-            ("collective-GRU".into(), by_robots(&|r| pct(r, "collective", false))),
-            ("consensus".into(), by_robots(&|r| pct(r, "consensus", false))),
-            ("ego-GRU".into(), by_robots(&|r| pct(r, "ego", false))),
+            ("collective-GRU".into(), by_robots(&|r| pct(r, Scored::Collective, false))),
+            ("consensus".into(), by_robots(&|r| pct(r, Scored::Consensus, false))),
+            ("ego-GRU".into(), by_robots(&|r| pct(r, Scored::Ego, false))),
             ("coverage (ticks decided)".into(), by_robots(&|r| 100.0 * r.coverage)),
-            ("team over all ticks".into(), by_robots(&|r| pct(r, "team_all_ticks", false))),
+            ("team over all ticks".into(), by_robots(&|r| pct(r, Scored::TeamAllTicks, false))),
         ],
     )?;
     written.push(robots);
@@ -162,14 +164,14 @@ pub fn write_all(st: &Studies, dir: &Path) -> Result<Vec<PathBuf>> {
                 .collect::<Vec<_>>()
         };
         let s = if robots > 1 { "s" } else { "" };
-        series.push((format!("collective t, {robots} robot{s}"), of(&|r| pct(r, "collective", false))));
+        series.push((format!("collective t, {robots} robot{s}"), of(&|r| pct(r, Scored::Collective, false))));
         series.push((
             format!("  95 % CI low, {robots} robot{s}"),
-            of(&|r| r.models.get("collective").map_or(0.0, |a| 100.0 * a.t_ci95[0])),
+            of(&|r| r.models.get(&Scored::Collective).map_or(0.0, |a| 100.0 * a.t_ci95[0])),
         ));
         series.push((
             format!("  95 % CI high, {robots} robot{s}"),
-            of(&|r| r.models.get("collective").map_or(0.0, |a| 100.0 * a.t_ci95[1])),
+            of(&|r| r.models.get(&Scored::Collective).map_or(0.0, |a| 100.0 * a.t_ci95[1])),
         ));
     }
     lines(
@@ -190,15 +192,15 @@ pub fn write_all(st: &Studies, dir: &Path) -> Result<Vec<PathBuf>> {
         "frames",
         (2.0, 11.0),
         &[
-            ("collective t".into(), by_frames(&|r| pct(r, "collective", false))),
-            ("collective t+1…H".into(), by_frames(&|r| pct(r, "collective", true))),
-            ("ego t".into(), by_frames(&|r| pct(r, "ego", false))),
-            ("consensus t".into(), by_frames(&|r| pct(r, "consensus", false))),
+            ("collective t".into(), by_frames(&|r| pct(r, Scored::Collective, false))),
+            ("collective t+1…H".into(), by_frames(&|r| pct(r, Scored::Collective, true))),
+            ("ego t".into(), by_frames(&|r| pct(r, Scored::Ego, false))),
+            ("consensus t".into(), by_frames(&|r| pct(r, Scored::Consensus, false))),
         ],
     )?;
     written.push(resolution);
 
-    if let Some(r) = st.scenarios.iter().find(|r| r.scenario == 3) {
+    if let Some(r) = st.scenarios.iter().find(|r| r.scenario == Scenario::Dynamic) {
         for (name, c) in &r.confusion {
             let path = dir.join(format!("confusion_{name}.png"));
             confusion(&path, &format!("{name}, scenario 3, 3 robots: share of each true station"), c)?;

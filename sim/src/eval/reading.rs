@@ -1,11 +1,13 @@
-//! The results page's reading of the targets of perception that transfers (issue 13):
+//! The results page's reading of the targets for perception that transfers to new floors:
 //! each target read off the runs of `--all`, met or missed and by how much, and then
 //! what bounds the ones missed — where the collective's errors fall, and what the
 //! runs say a target would need. Everything here is computed from the runs, so the
 //! reading stays true when the page is regenerated with other models or floors.
 
+use super::figures::{at, lead, maps, pct, with_ci};
+use super::scored::Scored;
 use super::studies::{
-    at, lead, maps, pct, with_ci, Studies, FRESH_FLOORS, FRESH_SEED_OFFSET, HELDOUT_FLOORS, WARM_MAP_S,
+    RunKey, Studies, FRESH_FLOORS, FRESH_SEED_OFFSET, HELDOUT_FLOORS, MIRRORED_FLOORS, MOVED_FLOORS, WARM_MAP_S,
 };
 use super::{PhaseAccuracy, Report};
 use spwi_world::layout::CameraPolicy;
@@ -20,19 +22,55 @@ const SETTINGS: [(CameraPolicy, bool); 4] = [
 ];
 
 /// The floors beside the held-out ones whose gap to them is a target.
-const VARIANT_FLOORS: [&str; 2] = ["factory-moved", "factory.toml mirrored"];
+const VARIANT_FLOORS: [&str; 2] = [MOVED_FLOORS, MIRRORED_FLOORS];
 
-/// The targets, as fractions: the verdicts and the bounds' paragraphs read the same ones.
+/// A target of the reading, stated once: the verdicts, the bounds' paragraphs and the
+/// page's text all read it from here.
+#[derive(Debug, Clone, Copy)]
+struct Target {
+    /// As a fraction (a share, or a lead in accuracy).
+    value: f64,
+    bound: Bound,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Bound {
+    /// A lead of at least `value`, in points.
+    Lead,
+    /// A share of at least `value`.
+    Share,
+    /// At most `value` behind, in points.
+    Gap,
+}
+
+impl Target {
+    /// "≥ +10 pts", "≥ 80 %", "≤ 5 pts".
+    fn stated(self) -> String {
+        let v = 100.0 * self.value;
+        match self.bound {
+            Bound::Lead => format!("≥ +{v:.0} pts"),
+            Bound::Share => format!("≥ {v:.0} %"),
+            Bound::Gap => format!("≤ {v:.0} pts"),
+        }
+    }
+
+    /// The same in a paragraph's heading, where the unit of a lead goes without
+    /// saying: "≥ +10", "≥ 80 %".
+    fn headline(self) -> String {
+        self.stated().trim_end_matches(" pts").to_owned()
+    }
+}
+
 /// The collective's lead over the CVM at t.
-const CVM_LEAD: f64 = 0.10;
+const CVM_LEAD: Target = Target { value: 0.10, bound: Bound::Lead };
 /// The collective's lead over the ego GRU at t.
-const EGO_LEAD: f64 = 0.08;
+const EGO_LEAD: Target = Target { value: 0.08, bound: Bound::Lead };
 /// How far a variant of the built-in floor may fall behind the held-out floors.
-const VARIANT_GAP: f64 = 0.05;
+const VARIANT_GAP: Target = Target { value: 0.05, bound: Bound::Gap };
 /// The team's accuracy over all ticks with 3 robots.
-const TEAM_ALL_TICKS: f64 = 0.80;
+const TEAM_ALL_TICKS: Target = Target { value: 0.80, bound: Bound::Share };
 /// The recall of the farther station of a close pair.
-const FARTHER_RECALL: f64 = 0.75;
+const FARTHER_RECALL: Target = Target { value: 0.75, bound: Bound::Share };
 
 /// A station on the team's map on fewer robot-ticks than this counts as unseen.
 const UNSEEN: f64 = 0.10;
@@ -42,8 +80,7 @@ fn scored_runs(st: &Studies) -> Vec<&Report> {
     st.designs.iter().chain(&st.generalisation).chain(&st.warm_maps).collect()
 }
 
-/// The run of set `ours` with `robots` robots on `floors` (the start of its name), under
-/// `cameras`, with maps `warm` or empty.
+/// The run of `ours` with `robots` robots on `floors`, with these cameras and maps.
 fn find<'a>(
     runs: &[&'a Report],
     ours: &str,
@@ -51,13 +88,7 @@ fn find<'a>(
     robots: usize,
     (cameras, warm): (CameraPolicy, bool),
 ) -> Option<&'a Report> {
-    runs.iter().copied().find(|r| {
-        r.model_set == ours
-            && r.robots == robots
-            && r.floors.starts_with(floors)
-            && r.cameras == Some(cameras)
-            && (r.warm_map_s > 0.0) == warm
-    })
+    RunKey { model_set: ours, floors, robots, cameras, warm }.find(runs)
 }
 
 /// "fixed" or "track".
@@ -103,47 +134,54 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
     let fresh_runs: Vec<&Report> = st.fresh.iter().collect();
     let Some(heldout) = find(&all, ours, HELDOUT_FLOORS, 3, (cameras, warm)) else { return };
     let fresh = find(&fresh_runs, ours, FRESH_FLOORS, 3, (cameras, warm));
-    let (Some(collective), Some(cvm)) = (at(heldout, "collective"), at(heldout, "cvm")) else { return };
+    let (Some(collective), Some(cvm)) = (at(heldout, Scored::Collective), at(heldout, Scored::Cvm)) else { return };
     let setting = setting(cameras, heldout);
     // A measure on the fresh sample: "+4.1, missed by 5.9 pts", or "–" where not run.
     let on_fresh = |measure: &dyn Fn(&Report) -> Option<(String, String)>| {
         fresh.and_then(measure).map_or("–".to_owned(), |(value, verdict)| format!("{value}, {verdict}"))
     };
-    let vs_cvm =
-        |r: &Report| lead(r, "collective", "cvm").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, CVM_LEAD, None)));
+    let vs_cvm = |r: &Report| {
+        lead(r, Scored::Collective, Scored::Cvm)
+            .map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, CVM_LEAD.value, None)))
+    };
     let _ = writeln!(
         w,
-        "| collective − CVM at t | ≥ +10 pts | {setting} | {:+.1} (collective {}, CVM {}) | {} | {} |",
+        "| collective − CVM at t | {target} | {setting} | {:+.1} (collective {}, CVM {}) | {} | {} |",
         100.0 * (collective.0 - cvm.0),
         with_ci(collective.0, collective.1),
         with_ci(cvm.0, cvm.1),
-        verdict(collective.0 - cvm.0, CVM_LEAD, None),
-        on_fresh(&vs_cvm)
+        verdict(collective.0 - cvm.0, CVM_LEAD.value, None),
+        on_fresh(&vs_cvm),
+        target = CVM_LEAD.stated(),
     );
     for floors in VARIANT_FLOORS {
-        if let Some(c) = find(&all, ours, floors, 3, (cameras, warm)).and_then(|r| at(r, "collective")) {
+        if let Some(c) = find(&all, ours, floors, 3, (cameras, warm)).and_then(|r| at(r, Scored::Collective)) {
             let behind = collective.0 - c.0;
             let _ = writeln!(
                 w,
-                "| collective at t on {floors}, behind the held-out floors | ≤ 5 pts | {setting} | {:.1} (collective {}) | {} | – |",
+                "| collective at t on {floors}, behind the held-out floors | {target} | {setting} | {:.1} (collective {}) | {} | – |",
                 100.0 * behind,
                 with_ci(c.0, c.1),
-                verdict(-behind, -VARIANT_GAP, None)
+                verdict(-behind, -VARIANT_GAP.value, None),
+                target = VARIANT_GAP.stated(),
             );
         }
     }
-    let vs_ego =
-        |r: &Report| lead(r, "collective", "ego").map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, EGO_LEAD, None)));
+    let vs_ego = |r: &Report| {
+        lead(r, Scored::Collective, Scored::Ego)
+            .map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, EGO_LEAD.value, None)))
+    };
     if let Some((value, verdict)) = vs_ego(heldout) {
         let _ = writeln!(
             w,
-            "| collective − ego at t | ≥ +8 pts | {setting} | {value} | {verdict} | {} |",
-            on_fresh(&vs_ego)
+            "| collective − ego at t | {target} | {setting} | {value} | {verdict} | {} |",
+            on_fresh(&vs_ego),
+            target = EGO_LEAD.stated(),
         );
     }
     let team: Vec<(f64, [f64; 2])> = (1..=4)
         .filter_map(|n| find(&all, ours, HELDOUT_FLOORS, n, (cameras, warm)))
-        .filter_map(|r| at(r, "team_all_ticks"))
+        .filter_map(|r| at(r, Scored::TeamAllTicks))
         .collect();
     if team.len() == 4 {
         let rising = team.windows(2).all(|p| p[1].0 > p[0].0);
@@ -155,26 +193,28 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
         );
         let three = team[2];
         let team_3 = |r: &Report| {
-            at(r, "team_all_ticks").map(|a| (with_ci(a.0, a.1), verdict(a.0, TEAM_ALL_TICKS, Some(a.1[0]))))
+            at(r, Scored::TeamAllTicks).map(|a| (with_ci(a.0, a.1), verdict(a.0, TEAM_ALL_TICKS.value, Some(a.1[0]))))
         };
         let _ = writeln!(
             w,
-            "| team, all ticks, 3 robots | ≥ 80 % | {setting} | {} | {} | {} |",
+            "| team, all ticks, 3 robots | {target} | {setting} | {} | {} | {} |",
             with_ci(three.0, three.1),
-            verdict(three.0, TEAM_ALL_TICKS, Some(three.1[0])),
-            on_fresh(&team_3)
+            verdict(three.0, TEAM_ALL_TICKS.value, Some(three.1[0])),
+            on_fresh(&team_3),
+            target = TEAM_ALL_TICKS.stated(),
         );
     }
     let farther = |r: &Report| {
         r.close_pair
-            .get("collective_farther")
-            .map(|a| (with_ci(a.t, a.t_ci95), verdict(a.t, FARTHER_RECALL, Some(a.t_ci95[0]))))
+            .get(&Scored::CollectiveFarther)
+            .map(|a| (with_ci(a.t, a.t_ci95), verdict(a.t, FARTHER_RECALL.value, Some(a.t_ci95[0]))))
     };
     if let Some((value, verdict)) = farther(heldout) {
         let _ = writeln!(
             w,
-            "| recall of the farther station of a close pair | ≥ 75 % | {setting} | {value} | {verdict} | {} |",
-            on_fresh(&farther)
+            "| recall of the farther station of a close pair | {target} | {setting} | {value} | {verdict} | {} |",
+            on_fresh(&farther),
+            target = FARTHER_RECALL.stated(),
         );
     }
 }
@@ -228,8 +268,9 @@ fn bounds(st: &Studies, ours: &str, w: &mut String) {
     let all = scored_runs(st);
     let heldout: Vec<((CameraPolicy, bool), &Report)> =
         SETTINGS.into_iter().filter_map(|s| find(&all, ours, HELDOUT_FLOORS, 3, s).map(|r| (s, r))).collect();
-    let scored =
-        |r: &Report| !r.by_phase.is_empty() && r.models.contains_key("collective") && r.models.contains_key("cvm");
+    let scored = |r: &Report| {
+        !r.by_phase.is_empty() && r.models.contains_key(&Scored::Collective) && r.models.contains_key(&Scored::Cvm)
+    };
     if heldout.is_empty() || !heldout.iter().all(|(_, r)| scored(r)) {
         return;
     }
@@ -248,13 +289,13 @@ fn bounds(st: &Studies, ours: &str, w: &mut String) {
     for ((cameras, _), r) in &heldout {
         let parts: Vec<String> =
             r.by_phase.iter().map(|p| format!("{:.1} ({} / {})", lost(p), pct(p.collective.t), pct(p.cvm.t))).collect();
-        let unmapped = at(r, "collective_goal_unmapped").map_or("–".into(), |a| pct(a.0));
+        let unmapped = at(r, Scored::CollectiveGoalUnmapped).map_or("–".into(), |a| pct(a.0));
         let _ = writeln!(
             w,
             "| {} | {} | {} | {} | {}, {unmapped} | {} |",
             setting(*cameras, r),
-            pct(r.models["collective"].t),
-            pct(r.models["cvm"].t + CVM_LEAD),
+            pct(r.models[&Scored::Collective].t),
+            pct(r.models[&Scored::Cvm].t + CVM_LEAD.value),
             parts.join(" | "),
             pct(r.goal_unmapped_share),
             pct(best_of_both(r))
@@ -273,14 +314,17 @@ fn vs_cvm_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
     let missed: Vec<&Report> = heldout
         .iter()
         .map(|(_, r)| *r)
-        .filter(|r| lead(r, "collective", "cvm").is_some_and(|g| g < CVM_LEAD))
+        .filter(|r| lead(r, Scored::Collective, Scored::Cvm).is_some_and(|g| g < CVM_LEAD.value))
         .collect();
     if missed.is_empty() {
         return;
     }
     // How far the better of the two in every part stays below CVM + 10, where it does.
-    let shortfalls: Vec<f64> =
-        missed.iter().map(|r| 100.0 * (r.models["cvm"].t + CVM_LEAD - best_of_both(r))).filter(|s| *s > 0.0).collect();
+    let shortfalls: Vec<f64> = missed
+        .iter()
+        .map(|r| 100.0 * (r.models[&Scored::Cvm].t + CVM_LEAD.value - best_of_both(r)))
+        .filter(|s| *s > 0.0)
+        .collect();
     // The parts of the cycle where one of the two leads in every setting.
     let leads_everywhere = |ahead: fn(&PhaseAccuracy) -> bool| -> Vec<String> {
         let first = &heldout[0].1.by_phase;
@@ -292,14 +336,15 @@ fn vs_cvm_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
     let collective_leads = leads_everywhere(|p| p.collective.t > p.cvm.t);
     let cvm_leads = leads_everywhere(|p| p.cvm.t > p.collective.t);
     let mapped_leads: Vec<f64> =
-        heldout.iter().filter_map(|(_, r)| lead(r, "collective", "cvm_mapped")).map(|g| 100.0 * g).collect();
+        heldout.iter().filter_map(|(_, r)| lead(r, Scored::Collective, Scored::CvmMapped)).map(|g| 100.0 * g).collect();
     let _ = write!(
         w,
-        "- **Collective − CVM ≥ +10** (missed in {} of {} settings). The CVM is handed the true work spots, where the worker will stand; our models know only the stations the team mapped from its own detections. In every setting the collective leads in {} and the CVM in {}. ",
+        "- **Collective − CVM {target}** (missed in {} of {} settings). The CVM is handed the true work spots, where the worker will stand; our models know only the stations the team mapped from its own detections. In every setting the collective leads in {} and the CVM in {}. ",
         missed.len(),
         heldout.len(),
         list_or(&collective_leads, "no part"),
-        list_or(&cvm_leads, "no part")
+        list_or(&cvm_leads, "no part"),
+        target = CVM_LEAD.headline(),
     );
     if shortfalls.is_empty() {
         let _ = write!(w, "The better of the two in every part would clear CVM + 10: the collective would have to match the CVM where the CVM leads.");
@@ -326,8 +371,8 @@ fn variant_bounds(all: &[&Report], ours: &str, heldout: &[((CameraPolicy, bool),
     for ((cameras, warm), h) in heldout {
         for floors in VARIANT_FLOORS {
             let Some(v) = find(all, ours, floors, 3, (*cameras, *warm)) else { continue };
-            let (Some(c), Some(ch)) = (at(v, "collective"), at(h, "collective")) else { continue };
-            if ch.0 - c.0 <= VARIANT_GAP {
+            let (Some(c), Some(ch)) = (at(v, Scored::Collective), at(h, Scored::Collective)) else { continue };
+            if ch.0 - c.0 <= VARIANT_GAP.value {
                 continue;
             }
             let unseen: Vec<String> = v
@@ -354,12 +399,12 @@ fn variant_bounds(all: &[&Report], ours: &str, heldout: &[((CameraPolicy, bool),
                 );
             }
             let _ = write!(w, ".");
-            if let Some((right, _)) = at(v, "collective_goal_unmapped").filter(|_| v.goal_unmapped_share > 0.0) {
+            if let Some((right, _)) = at(v, Scored::CollectiveGoalUnmapped).filter(|_| v.goal_unmapped_share > 0.0) {
                 let _ = write!(w, " Where the goal is off the map the collective is right on {} %.", pct(right));
             }
             // The CVM learns nothing and reads no map: how far it falls says how much
             // harder the floor itself is.
-            if let (Some(held_out), Some(here)) = (at(h, "cvm"), at(v, "cvm")) {
+            if let (Some(held_out), Some(here)) = (at(h, Scored::Cvm), at(v, Scored::Cvm)) {
                 let change = 100.0 * (here.0 - held_out.0);
                 let _ = write!(
                     w,
@@ -375,47 +420,52 @@ fn variant_bounds(all: &[&Report], ours: &str, heldout: &[((CameraPolicy, bool),
 
 /// Why the collective does not lead the ego GRU by 8 points.
 fn sharing_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
-    let missed = heldout.iter().filter(|(_, r)| lead(r, "collective", "ego").is_some_and(|g| g < EGO_LEAD)).count();
+    let missed = heldout
+        .iter()
+        .filter(|(_, r)| lead(r, Scored::Collective, Scored::Ego).is_some_and(|g| g < EGO_LEAD.value))
+        .count();
     if missed == 0 {
         return;
     }
     let rows: Vec<String> = heldout
         .iter()
         .filter_map(|((cameras, _), r)| {
-            let (e, c) = (at(r, "ego")?.0, at(r, "collective")?.0);
+            let (e, c) = (at(r, Scored::Ego)?.0, at(r, Scored::Collective)?.0);
             Some(format!("{}, maps {}: ego {}, collective {}", named(*cameras), maps(r), pct(e), pct(c)))
         })
         .collect();
     let _ = writeln!(
         w,
-        "- **Collective − ego ≥ +8** (missed in {missed} of {} settings). What the team adds is what a robot does not see itself: the ego GRU reads the robot's own track and map, and the more of the floor its own camera covers — cameras that track the worker, maps warm from work — the better it does alone ({}).",
+        "- **Collective − ego {target}** (missed in {missed} of {} settings). What the team adds is what a robot does not see itself: the ego GRU reads the robot's own track and map, and the more of the floor its own camera covers — cameras that track the worker, maps warm from work — the better it does alone ({}).",
         heldout.len(),
-        rows.join("; ")
+        rows.join("; "),
+        target = EGO_LEAD.headline(),
     );
 }
 
 /// Why the team's accuracy over all ticks stays under 80 %.
 fn coverage_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
     for ((cameras, _), r) in heldout {
-        let Some((team, _)) = at(r, "team_all_ticks") else { continue };
-        if team >= TEAM_ALL_TICKS || *cameras != CameraPolicy::Track {
+        let Some((team, _)) = at(r, Scored::TeamAllTicks) else { continue };
+        if team >= TEAM_ALL_TICKS.value || *cameras != CameraPolicy::Track {
             continue;
         }
         let _ = writeln!(
             w,
-            "- **Team over all ticks ≥ 80 %** (track cameras, maps {}: {}). A tick on which no robot sees or still tracks the worker counts as wrong, so the team can score no more than its coverage, {} %; on the ticks it decides it is right on {} %.",
+            "- **Team over all ticks {target}** (track cameras, maps {}: {}). A tick on which no robot sees or still tracks the worker counts as wrong, so the team can score no more than its coverage, {} %; on the ticks it decides it is right on {} %.",
             maps(r),
             pct(team),
             pct(r.coverage),
-            pct(team / r.coverage.max(f64::EPSILON))
+            pct(team / r.coverage.max(f64::EPSILON)),
+            target = TEAM_ALL_TICKS.headline(),
         );
     }
 }
 
 /// Why the farther station of a close pair is recalled less than 75 % of the time.
 fn farther_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
-    let recall = |r: &Report| r.close_pair.get("collective_farther").map(|a| a.t);
-    let missed = heldout.iter().filter(|(_, r)| recall(r).is_some_and(|t| t < FARTHER_RECALL)).count();
+    let recall = |r: &Report| r.close_pair.get(&Scored::CollectiveFarther).map(|a| a.t);
+    let missed = heldout.iter().filter(|(_, r)| recall(r).is_some_and(|t| t < FARTHER_RECALL.value)).count();
     if missed == 0 {
         return;
     }
@@ -429,8 +479,9 @@ fn farther_bound(heldout: &[((CameraPolicy, bool), &Report)], w: &mut String) {
         .collect();
     let _ = write!(
         w,
-        "- **Recall of the farther station ≥ 75 %** (missed in {missed} of {} settings). The walk to the farther station of a close pair passes the nearer one first, so until it is past it only the body's facing and the map can tell the two apart",
-        heldout.len()
+        "- **Recall of the farther station {target}** (missed in {missed} of {} settings). The walk to the farther station of a close pair passes the nearer one first, so until it is past it only the body's facing and the map can tell the two apart",
+        heldout.len(),
+        target = FARTHER_RECALL.headline(),
     );
     if pairs.is_empty() {
         let _ = writeln!(w, ".");

@@ -2,6 +2,7 @@
 //! tick and robot, each with the instant it arrived. Agreement, latency, gaps and
 //! membership are read from here by the tests, `spwi-sim bench` and its soak.
 
+use crate::measures::Agreement;
 use anyhow::{anyhow, bail, Result};
 use spwi_proto::keys::{self, Topic};
 use spwi_proto::{decode, DecisionMsg, FleetId, RobotId, Station};
@@ -124,15 +125,14 @@ impl Decisions {
     pub fn agreement(&self, robots: &[RobotId], from: u64, to: u64) -> (f64, usize) {
         let log = self.lock();
         let classes = |d: &Decided| d.msg.steps.iter().map(|s| s.class).collect::<Vec<_>>();
-        let (mut same, mut common) = (0, 0);
+        let mut agreement = Agreement::default();
         for ds in log.range(from..=to).map(|(_, ds)| ds) {
             let Some(ds) = robots.iter().map(|r| ds.get(r)).collect::<Option<Vec<_>>>() else {
                 continue;
             };
-            common += 1;
-            same += usize::from(ds.iter().all(|d| classes(d) == classes(ds[0])));
+            agreement.tick(ds.iter().map(|d| classes(d)));
         }
-        (if common == 0 { 0.0 } else { same as f64 / common as f64 }, common)
+        (agreement.share(), agreement.compared as usize)
     }
 
     /// The longest run of consecutive ticks in `from..=to` that `robot` did not decide.
@@ -148,26 +148,5 @@ impl Decisions {
             }
         }
         gap
-    }
-}
-
-/// The `q` quantile of ascending `sorted` (nearest rank); 0 for none.
-pub fn percentile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)]
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn percentiles() {
-        let v: Vec<f64> = (1..=100).map(f64::from).collect();
-        assert_eq!(percentile(&v, 0.5), 51.0);
-        assert_eq!(percentile(&v, 0.99), 99.0);
-        assert_eq!(percentile(&[], 0.5), 0.0);
     }
 }

@@ -22,7 +22,7 @@ mod in_process;
 mod routers;
 
 pub use agent_process::{AgentProcess, Launch};
-pub use decisions::{percentile, Decided, Decisions};
+pub use decisions::{Decided, Decisions};
 pub use fleet::{layout_with_slots, next_tick_instant, usage, FleetOptions, LoopbackFleet, Usage};
 pub use hub::{secured_peer, Hub};
 pub use in_process::InProcessAgent;
