@@ -11,9 +11,7 @@
 //! Zenoh's 2. A robot's tick ends in a burst of messages (its share, relayed ballots,
 //! decision), and Zenoh drops a message that finds no free batch within 1 ms: on a
 //! busy host, where the link's sending task is not scheduled that soon, two batches
-//! lost the third message while each was express, in a batch of its own. Measured
-//! with the soak (8 agents, two CPU hogs beside them): 57 and 75 of 950 settled ticks
-//! missing a decision with 2 batches, 0 and 0 with 8 (docs/BENCHMARKS.md, "Soak").
+//! lose messages of the burst (docs/BENCHMARKS.md, "Soak", measures how many).
 //! Messages that are not express share a batch when the link lags
 //! (`daemon/publishing.rs`), so they need fewer; the margin stays.
 //!
@@ -21,15 +19,14 @@
 //! clients, a tick puts some fifty messages on every outgoing link at once. So
 //! [`build_router`] gives its links Zenoh's largest data queue ([`ROUTER_DATA_QUEUE_BATCHES`])
 //! and lets a message wait up to [`ROUTER_WAIT_BEFORE_DROP_US`] for a free batch instead of
-//! 1 ms: 16 robots as clients of one router on a busy 2-core host lost a robot's
-//! decision on 87–157 of 200 ticks with the agents' settings, and on none with these
-//! (docs/BENCHMARKS.md, "Peer mesh or routers").
+//! 1 ms: with the agents' settings, a router serving many robots on a busy host drops
+//! decisions (docs/BENCHMARKS.md, "Peer mesh or routers", measures it).
 //!
 //! Every link refuses a message larger than [`RX_MAX_MESSAGE_BYTES`], twice our largest
 //! (a full detection frame is about 135 kB; the codec refuses anything above
 //! `spwi_proto::MAX_MESSAGE_BYTES`). Zenoh's own limit is 1 GiB, and it reassembles a
-//! fragmented message before anyone can look at it: a peer sending one 256 MB message
-//! took a robot from 37 to 524 MB of memory before the codec refused it.
+//! fragmented message before anyone can look at it, so one huge message would cost
+//! hundreds of megabytes before the codec could refuse it (docs/FAULTS.md).
 //!
 //! A file given by the user is taken as is; set `transport/link/tx/lease` and the
 //! queue size in it. Only the receive limit is lowered there too when the file leaves

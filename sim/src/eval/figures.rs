@@ -72,3 +72,36 @@ pub(super) fn at(r: &Report, model: Scored) -> Option<(f64, [f64; 2])> {
 pub(super) fn lead(r: &Report, model: Scored, other: Scored) -> Option<f64> {
     Some(at(r, model)?.0 - at(r, other)?.0)
 }
+
+/// A table of the page, as a value: its header and its rows, each row a cell per
+/// column, written out as markdown by its one `Display`.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Table {
+    header: Vec<String>,
+    rows: Vec<Vec<String>>,
+}
+
+impl Table {
+    pub(super) fn new<S: ToString>(header: impl IntoIterator<Item = S>) -> Table {
+        Table { header: header.into_iter().map(|h| h.to_string()).collect(), rows: Vec::new() }
+    }
+
+    /// One row; as many cells as the header has columns.
+    pub(super) fn row<S: ToString>(&mut self, cells: impl IntoIterator<Item = S>) {
+        let row: Vec<String> = cells.into_iter().map(|c| c.to_string()).collect();
+        debug_assert_eq!(row.len(), self.header.len(), "a row of {row:?} under {:?}", self.header);
+        self.rows.push(row);
+    }
+}
+
+impl std::fmt::Display for Table {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let line = |f: &mut std::fmt::Formatter<'_>, cells: &[String]| writeln!(f, "| {} |", cells.join(" | "));
+        line(f, &self.header)?;
+        writeln!(f, "|{}", "---|".repeat(self.header.len()))?;
+        for r in &self.rows {
+            line(f, r)?;
+        }
+        Ok(())
+    }
+}

@@ -28,40 +28,55 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         "**Headline: the team's accuracy over all ticks** (`team, all ticks`): every robot's decision on every tick, a tick without a decision counted as wrong — what the fleet gets right. Per-model figures are over the ticks where that model predicts (a robot's models when it sees the worker; the consensus when some robot does).\n"
     );
     let _ = writeln!(w, "## Table II — scenarios (3 robots, 2 s → 2 s)\n");
-    let _ = writeln!(w, "| scenario | team, all ticks | GNN | ego t | collective t | collective t+1…H | consensus t | paper: GNN / ego t / collective t / consensus |");
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|");
+    let mut table = Table::new([
+        "scenario",
+        "team, all ticks",
+        "GNN",
+        "ego t",
+        "collective t",
+        "collective t+1…H",
+        "consensus t",
+        "paper: GNN / ego t / collective t / consensus",
+    ]);
     let paper2 = ["71.2 / 84.2 / 92.8 / 90.3", "73.4 / 82.5 / 91.8 / 89.3", "70.7 / 77.7 / 88.9 / 88.5"];
     for (r, p) in st.scenarios.iter().zip(paper2) {
         let (c, cf) = acc(r, Scored::Collective);
-        let _ = writeln!(
-            w,
-            "| {} | {} | {} | {} | {c} | {cf} | {} | {p} |",
-            r.scenario as u8,
+        table.row([
+            (r.scenario as u8).to_string(),
             acc(r, Scored::TeamAllTicks).0,
             acc(r, Scored::Gnn).0,
             acc(r, Scored::Ego).0,
-            acc(r, Scored::Consensus).0
-        );
+            c.to_string(),
+            cf.to_string(),
+            acc(r, Scored::Consensus).0,
+            p.to_string(),
+        ]);
     }
+    let _ = write!(w, "{table}");
     if let Some(r) = st.scenarios.iter().find(|r| r.scenario == Scenario::Dynamic) {
         let _ = writeln!(w, "\n## Table III — per robot (scenario 3, 3 robots, 2 s → 2 s)\n");
-        let _ = writeln!(w, "| robot | GNN | ego t | collective t | collective t+1…H |");
-        let _ = writeln!(w, "|---|---|---|---|---|");
+        let mut table = Table::new(["robot", "GNN", "ego t", "collective t", "collective t+1…H"]);
         for p in &r.per_robot {
             let f = |a: &super::score::Accuracy| with_ci(a.t, a.t_ci95);
             let future = match (p.collective.future, p.collective.future_ci95) {
                 (Some(v), Some(ci)) => with_ci(v, ci),
                 _ => "–".into(),
             };
-            let _ = writeln!(w, "| {} | {} | {} | {} | {future} |", p.robot, pct(p.gnn), f(&p.ego), f(&p.collective));
+            table.row([
+                p.robot.to_string(),
+                pct(p.gnn),
+                f(&p.ego).to_string(),
+                f(&p.collective).to_string(),
+                future.to_string(),
+            ]);
         }
+        let _ = write!(w, "{table}");
         let _ = writeln!(
             w,
             "\nPaper: robots 69.2–72.9 (GNN), 76.1–79.2 (ego t), 86.3–91.8 (collective t), consensus 88.5.\n"
         );
         let _ = writeln!(w, "## Table IV — models on the current frame (scenario 3, 3 robots)\n");
-        let _ = writeln!(w, "| model | ours, t | ours, t+1…H | paper, t |");
-        let _ = writeln!(w, "|---|---|---|---|");
+        let mut table = Table::new(["model", "ours, t", "ours, t+1…H", "paper, t"]);
         for (name, label, paper) in [
             (Scored::Gnn, "GNN", "70.73"),
             (Scored::Ego, "Ego-GRU", "77.7"),
@@ -73,14 +88,15 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             (Scored::TeamAllTicks, "Team, all ticks", "–"),
         ] {
             let (t, f) = acc(r, name);
-            let _ = writeln!(w, "| {label} | {t} | {f} | {paper} |");
+            table.row([label.to_string(), t.to_string(), f.to_string(), paper.to_string()]);
         }
+        let _ = write!(w, "{table}");
         if !r.close_pair.is_empty() {
             let _ = writeln!(
                 w,
                 "\nTicks where the worker heads to a station of the close pair (work spots within 3.5 m):\n"
             );
-            let _ = writeln!(w, "| model | t | t+1…H |\n|---|---|---|");
+            let mut table = Table::new(["model", "t", "t+1…H"]);
             for name in [
                 Scored::TeamAllTicks,
                 Scored::Ego,
@@ -91,8 +107,9 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 Scored::CvmFarther,
             ] {
                 let (t, f) = acc_in(&r.close_pair, name);
-                let _ = writeln!(w, "| {name} | {t} | {f} |");
+                table.row([name.to_string(), t.to_string(), f.to_string()]);
             }
+            let _ = write!(w, "{table}");
             let _ = writeln!(
                 w,
                 "\n`*_farther`: the ticks where the goal is the station of the pair farther from the worker (its walk passes the nearer one first), i.e. the recall of the farther station."
@@ -103,12 +120,19 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 w,
                 "\nBy where the tick falls in the worker's cycle: at work, or walking so long after it committed to its goal (the label changes in that very tick; the motion shows it only as it builds up):\n"
             );
-            let _ = writeln!(w, "| phase | share of ticks | collective t | ego t | CVM t |\n|---|---|---|---|---|");
+            let mut table = Table::new(["phase", "share of ticks", "collective t", "ego t", "CVM t"]);
             for p in &r.by_phase {
                 let c = |a: &super::score::Accuracy| with_ci(a.t, a.t_ci95);
                 let share = format!("{:.1}", 100.0 * p.share);
-                let _ = writeln!(w, "| {} | {share} | {} | {} | {} |", p.phase, c(&p.collective), c(&p.ego), c(&p.cvm));
+                table.row([
+                    p.phase.to_string(),
+                    share.to_string(),
+                    c(&p.collective).to_string(),
+                    c(&p.ego).to_string(),
+                    c(&p.cvm).to_string(),
+                ]);
             }
+            let _ = write!(w, "{table}");
         }
         let _ = writeln!(w, "\nConfusion at t (rows: true station 0–3, columns: predicted):\n");
         for (name, c) in &r.confusion {
@@ -118,25 +142,29 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         let _ = write!(w, "{}", figure("confusion_collective.png", "collective confusion"));
     }
     let _ = writeln!(w, "\n## Number of robots (scenario 3, 2 s → 2 s) — paper Fig. 5: accuracy grows from 1 to 3 robots, less from 3 to 4\n");
-    let _ = writeln!(
-        w,
-        "| robots | team, all ticks: t | team t+1…H | coverage | ego t | collective t | consensus t | agreement |"
-    );
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|");
+    let mut table = Table::new([
+        "robots",
+        "team, all ticks: t",
+        "team t+1…H",
+        "coverage",
+        "ego t",
+        "collective t",
+        "consensus t",
+        "agreement",
+    ]);
     for r in &st.robots {
-        let _ = writeln!(
-            w,
-            "| {} | {} | {} | {} | {} | {} | {} | {} |",
-            r.robots,
+        table.row([
+            r.robots.to_string(),
             acc(r, Scored::TeamAllTicks).0,
             acc(r, Scored::TeamAllTicks).1,
             pct(r.coverage),
             acc(r, Scored::Ego).0,
             acc(r, Scored::Collective).0,
             acc(r, Scored::Consensus).0,
-            pct(r.agreement)
-        );
+            pct(r.agreement),
+        ]);
     }
+    let _ = write!(w, "{table}");
     let _ = writeln!(
         w,
         "\n*Coverage*: ticks on which the team decides (some robot sees the worker or, with a relation set, still tracks it). Robots 4–8 take layout slots with poorer views, so per-model averages mix in harder samples; coverage and the team's accuracy over all ticks show what a larger fleet buys."
@@ -148,30 +176,34 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         "Model sets: {} (models/README.md: the same design and data, other windows).\n",
         set_names(&st.horizons)
     );
-    let _ = writeln!(w, "| past → future | robots | collective t | collective t+1…H | ego t | team, all ticks |");
-    let _ = writeln!(w, "|---|---|---|---|---|---|");
+    let mut table =
+        Table::new(["past → future", "robots", "collective t", "collective t+1…H", "ego t", "team, all ticks"]);
     for r in &st.horizons {
         let (c, cf) = acc(r, Scored::Collective);
-        let _ = writeln!(
-            w,
-            "| {:.0} s → {:.0} s | {} | {c} | {cf} | {} | {} |",
-            r.window as f64 * spwi_proto::TICK_PERIOD.as_secs_f64(),
-            r.horizon as f64 * spwi_proto::TICK_PERIOD.as_secs_f64(),
-            r.robots,
+        table.row([
+            format!(
+                "{:.0} s → {:.0} s",
+                r.window as f64 * spwi_proto::TICK_PERIOD.as_secs_f64(),
+                r.horizon as f64 * spwi_proto::TICK_PERIOD.as_secs_f64()
+            ),
+            r.robots.to_string(),
+            c.to_string(),
+            cf.to_string(),
             acc(r, Scored::Ego).0,
-            acc(r, Scored::TeamAllTicks).0
-        );
+            acc(r, Scored::TeamAllTicks).0,
+        ]);
     }
+    let _ = write!(w, "{table}");
     let _ = write!(w, "{}", figure("horizons.png", "time horizons"));
     let _ = writeln!(w, "\n## Temporal resolution (scenario 3, 3 robots, 1 s → 1 s) — paper Fig. 6\n");
     let _ = writeln!(w, "Model sets: {}.\n", set_names(&st.resolution));
-    let _ = writeln!(w, "| frames of the last second | ego t | collective t | collective t+1…H | consensus t |");
-    let _ = writeln!(w, "|---|---|---|---|---|");
+    let mut table =
+        Table::new(["frames of the last second", "ego t", "collective t", "collective t+1…H", "consensus t"]);
     for r in &st.resolution {
         let (c, cf) = acc(r, Scored::Collective);
-        let _ =
-            writeln!(w, "| {} | {} | {c} | {cf} | {} |", r.frames, acc(r, Scored::Ego).0, acc(r, Scored::Consensus).0);
+        table.row([r.frames.to_string(), acc(r, Scored::Ego).0, c, cf, acc(r, Scored::Consensus).0]);
     }
+    let _ = write!(w, "{table}");
     let _ = write!(w, "{}", figure("resolution.png", "temporal resolution"));
     let _ = writeln!(w, "\n## Beyond the paper: faults (scenario 3, 4 robots, 2 s → 2 s)\n");
     let _ = writeln!(
@@ -184,8 +216,17 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         TickConfig::default().trust_window_ticks,
         TickConfig::default().consensus.name(),
     );
-    let _ = writeln!(w, "| fault | protocol | team, all ticks | healthy collective t | consensus t | consensus t+1…H | agreement | trust: faulty robot / others | messages / bytes per robot tick |");
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|");
+    let mut table = Table::new([
+        "fault",
+        "protocol",
+        "team, all ticks",
+        "healthy collective t",
+        "consensus t",
+        "consensus t+1…H",
+        "agreement",
+        "trust: faulty robot / others",
+        "messages / bytes per robot tick",
+    ]);
     for r in &st.faults {
         let f = &r.faults;
         let what = if f.dropouts > 0 {
@@ -209,17 +250,19 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             format!("ours, {} rule", r.tick.consensus.name())
         };
         let (c, cf) = acc(r, Scored::Consensus);
-        let _ = writeln!(
-            w,
-            "| {what} | {protocol} | {} | {} | {c} | {cf} | {} | {} | {:.2} / {:.0} |",
+        table.row([
+            what.to_string(),
+            protocol.to_string(),
             acc(r, Scored::TeamAllTicks).0,
             acc(r, Scored::HealthyCollective).0,
+            c.to_string(),
+            cf.to_string(),
             pct(r.agreement),
             trust_split(r),
-            r.messages_per_robot_tick,
-            r.bytes_per_robot_tick
-        );
+            format!("{:.2} / {:.0}", r.messages_per_robot_tick, r.bytes_per_robot_tick),
+        ]);
     }
+    let _ = write!(w, "{table}");
     if !st.generalisation.is_empty() {
         let _ =
             writeln!(w, "\n## Generalisation: floors the models never saw (scenario 3, 3 robots, default set, at t)\n");
@@ -227,34 +270,20 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             w,
             "First column: the study floors above (held-out episodes). Then floors the models never saw: held-out generated floors ({HELDOUT_FLOORS}, one episode after another on each), the built-in floor (unless it is the study floor), the built-in floor with two stations swapped, and mirrored (every relation kept, every place moved); then the last three again under cameras that track the worker and look round while it works (*Track cameras*; the held-out floors under them are in the next table). A model that learned the worker's relations to objects keeps its accuracy across the columns; one that learned places does not. The training floors of the default set are in its manifest (`dataset.exports`).\n"
         );
-        let _ = write!(w, "| model |");
-        for r in &st.generalisation {
-            let _ = write!(w, " {} |", r.floors);
-        }
-        let _ = writeln!(w, "\n|---|{}", "---|".repeat(st.generalisation.len()));
+        let runs = &st.generalisation;
+        let row = |first: &str, cell: &dyn Fn(&Report) -> String| {
+            std::iter::once(first.to_owned()).chain(runs.iter().map(cell)).collect::<Vec<_>>()
+        };
+        let mut table = Table::new(row("model", &|r| r.floors.clone()));
         for name in Scored::LISTED {
-            let _ = write!(w, "| {name} |");
-            for r in &st.generalisation {
-                let _ = write!(w, " {} |", acc(r, name).0);
-            }
-            let _ = writeln!(w);
+            table.row(row(name.name(), &|r| acc(r, name).0));
         }
-        let _ = write!(w, "| coverage |");
-        for r in &st.generalisation {
-            let _ = write!(w, " {} |", pct(r.coverage));
-        }
-        let _ = writeln!(w);
-        let _ = write!(w, "| goal unmapped |");
-        for r in &st.generalisation {
-            let _ = write!(w, " {} |", pct(r.goal_unmapped_share));
-        }
-        let _ = writeln!(w);
-        let _ = write!(w, "| on the team map: storage / workstation / assembly / manufacturing |");
-        for r in &st.generalisation {
-            let shares: Vec<String> = r.map.iter().map(|p| format!("{:.0}", 100.0 * p.mapped)).collect();
-            let _ = write!(w, " {} |", shares.join(" / "));
-        }
-        let _ = writeln!(w);
+        table.row(row("coverage", &|r| pct(r.coverage)));
+        table.row(row("goal unmapped", &|r| pct(r.goal_unmapped_share)));
+        table.row(row("on the team map: storage / workstation / assembly / manufacturing", &|r| {
+            r.map.iter().map(|p| format!("{:.0}", 100.0 * p.mapped)).collect::<Vec<_>>().join(" / ")
+        }));
+        let _ = write!(w, "{table}");
         let _ = writeln!(
             w,
             "\n*Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map. *On the team map*: share of the scored robot-ticks on which each station is on it (built from the robots' own detections: a station no camera looks at stays off the map)."
@@ -269,31 +298,43 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             w,
             "`paper`: the paper's rows (GCN embedding ‖ mean of the peers' ‖ keypoints). `relations`: the same GCN and data, rows ending with the worker's relations to the stations the team mapped from its own detections (floor-frame track shared and fused; `core/src/floor/`), and votes from the track while it is fresh. `peer-set`: the relations rows, and a collective GRU that also pools one relation block per peer it heard (each peer's own estimate of the worker against the team map; DeepSets over 0–7 peers, `models/README.md`). `default`: the relations rows, each followed by where the worker's body faces against every station (the ego GRU's from the robot's own keypoints, the collective's fused over the robots whose estimates make the team's track, each sharing its own in its embedding message). CVM is given the true work spots; our models map the stations themselves, and *CVM, mapped* is the same CVM given only those. *Goal unmapped*: share of the collective's ticks on which the station the worker heads to is missing from the robot's team map (no relation row describes it). *Close pair*: ticks heading to a station of a close pair.\n"
         );
-        let _ = writeln!(
-            w,
-            "| set | cameras | robots | team, all ticks | coverage | ego t | collective t | collective − ego | consensus t | CVM t | CVM, mapped t | goal unmapped | close pair, collective t | agreement |"
-        );
-        let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+        let mut table = Table::new([
+            "set",
+            "cameras",
+            "robots",
+            "team, all ticks",
+            "coverage",
+            "ego t",
+            "collective t",
+            "collective − ego",
+            "consensus t",
+            "CVM t",
+            "CVM, mapped t",
+            "goal unmapped",
+            "close pair, collective t",
+            "agreement",
+        ]);
         for r in &st.designs {
             let gap = points(r, Scored::Collective, Scored::Ego);
             let cameras = r.cameras.map_or("mixed cameras".to_owned(), |p| format!("{p:?} cameras"));
-            let _ = writeln!(
-                w,
-                "| {} | {cameras} | {} | {} | {} | {} | {} | {gap} | {} | {} | {} | {} | {} | {} |",
-                r.model_set,
-                r.robots,
+            table.row([
+                r.model_set.to_string(),
+                cameras.to_string(),
+                r.robots.to_string(),
                 acc(r, Scored::TeamAllTicks).0,
                 pct(r.coverage),
                 acc(r, Scored::Ego).0,
                 acc(r, Scored::Collective).0,
+                gap.to_string(),
                 acc(r, Scored::Consensus).0,
                 acc(r, Scored::Cvm).0,
                 acc(r, Scored::CvmMapped).0,
                 pct(r.goal_unmapped_share),
                 acc_in(&r.close_pair, Scored::Collective).0,
-                pct(r.agreement)
-            );
+                pct(r.agreement),
+            ]);
         }
+        let _ = write!(w, "{table}");
     }
     if !st.warm_maps.is_empty() {
         let _ =
@@ -302,19 +343,28 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             w,
             "A daemon keeps its station map for as long as it runs, so a fleet that has worked on a floor for a while has mapped every station its cameras have seen; every table above starts each 30 s episode with empty maps instead, a fleet's first seconds on a floor. Here the robots first work {WARM_MAP_S} s on the floor (unscored, another worker, the same robots; `spwi-sim eval --warm-map {WARM_MAP_S}`, `sim/src/team_floor.rs`), then the episode is scored as above. The maps still come from the robots' own detections only; the models never saw these floors. Each warm row follows its cold twin from the tables above. *Farther station*: recall of the station of a close pair the worker's walk reaches second.\n"
         );
-        let _ = writeln!(
-            w,
-            "| floors | robots | maps | team, all ticks | coverage | ego t | collective t | collective − ego | consensus t | CVM t | goal unmapped | farther station, collective t | agreement |"
-        );
-        let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+        let mut table = Table::new([
+            "floors",
+            "robots",
+            "maps",
+            "team, all ticks",
+            "coverage",
+            "ego t",
+            "collective t",
+            "collective − ego",
+            "consensus t",
+            "CVM t",
+            "goal unmapped",
+            "farther station, collective t",
+            "agreement",
+        ]);
         for warm in &st.warm_maps {
             for r in twin(st, &warm.floors, warm, 0.0).into_iter().chain([warm]) {
                 let maps = maps(r);
-                let _ = writeln!(
-                    w,
-                    "| {} | {} | {maps} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-                    r.floors,
-                    r.robots,
+                table.row([
+                    r.floors.to_string(),
+                    r.robots.to_string(),
+                    maps.to_string(),
                     acc(r, Scored::TeamAllTicks).0,
                     pct(r.coverage),
                     acc(r, Scored::Ego).0,
@@ -324,10 +374,11 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                     acc(r, Scored::Cvm).0,
                     pct(r.goal_unmapped_share),
                     acc_in(&r.close_pair, Scored::CollectiveFarther).0,
-                    pct(r.agreement)
-                );
+                    pct(r.agreement),
+                ]);
             }
         }
+        let _ = write!(w, "{table}");
     }
     fresh_sample(st, s.seed, w);
     super::reading::targets(st, s.seed, w);
@@ -365,21 +416,29 @@ fn fresh_sample(st: &Studies, seed: u64, w: &mut String) {
         "Every design on this page was chosen, and every target of the reading below is read, on the held-out floors {HELDOUT_FLOORS} with episodes of seed {seed}: a choice made by looking at one sample can flatter it. Here the same fleet on the next fifty held-out floors ({FRESH_FLOORS}) with episodes of seed {}, on which no choice was measured; each run follows its twin on {HELDOUT_FLOORS}.\n",
         seed + FRESH_SEED_OFFSET
     );
-    let _ = writeln!(
-        w,
-        "| floors | seed | maps | team, all ticks | coverage | ego t | collective t | CVM t | collective − CVM | collective − ego | goal unmapped | farther station, collective t |"
-    );
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut table = Table::new([
+        "floors",
+        "seed",
+        "maps",
+        "team, all ticks",
+        "coverage",
+        "ego t",
+        "collective t",
+        "CVM t",
+        "collective − CVM",
+        "collective − ego",
+        "goal unmapped",
+        "farther station, collective t",
+    ]);
     for f in &st.fresh {
         let Some(cameras) = f.cameras else { continue };
         let twin = twin(st, &with_cameras(HELDOUT_FLOORS, cameras), f, f.warm_map_s);
         for r in twin.into_iter().chain([f]) {
             let maps = maps(r);
-            let _ = writeln!(
-                w,
-                "| {} | {} | {maps} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
-                r.floors,
-                r.seed,
+            table.row([
+                r.floors.to_string(),
+                r.seed.to_string(),
+                maps.to_string(),
                 acc(r, Scored::TeamAllTicks).0,
                 pct(r.coverage),
                 acc(r, Scored::Ego).0,
@@ -389,7 +448,8 @@ fn fresh_sample(st: &Studies, seed: u64, w: &mut String) {
                 points(r, Scored::Collective, Scored::Ego),
                 pct(r.goal_unmapped_share),
                 acc_in(&r.close_pair, Scored::CollectiveFarther).0,
-            );
+            ]);
         }
     }
+    let _ = write!(w, "{table}");
 }
