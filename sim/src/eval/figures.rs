@@ -86,6 +86,11 @@ impl Table {
         Table { header: header.into_iter().map(|h| h.to_string()).collect(), rows: Vec::new() }
     }
 
+    /// No row yet.
+    pub(super) fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
     /// One row; as many cells as the header has columns.
     pub(super) fn row<S: ToString>(&mut self, cells: impl IntoIterator<Item = S>) {
         let row: Vec<String> = cells.into_iter().map(|c| c.to_string()).collect();

@@ -4,7 +4,7 @@
 //! runs say a target would need. Everything here is computed from the runs, so the
 //! reading stays true when the page is regenerated with other models or floors.
 
-use super::figures::{at, lead, maps, pct, with_ci};
+use super::figures::{at, lead, maps, pct, with_ci, Table};
 use super::scored::Scored;
 use super::studies::{
     RunKey, Studies, FRESH_FLOORS, FRESH_SEED_OFFSET, HELDOUT_FLOORS, MIRRORED_FLOORS, MOVED_FLOORS, WARM_MAP_S,
@@ -96,9 +96,9 @@ fn named(cameras: CameraPolicy) -> String {
     format!("{cameras:?}").to_lowercase()
 }
 
-/// "fixed | empty": the cameras and maps columns of a row.
-fn setting(cameras: CameraPolicy, r: &Report) -> String {
-    format!("{} | {}", named(cameras), maps(r))
+/// ["fixed", "empty"]: the cameras and maps columns of a row.
+fn setting(cameras: CameraPolicy, r: &Report) -> [String; 2] {
+    [named(cameras), maps(r)]
 }
 
 /// The targets (scenario 3, 3 robots, the default set on the held-out floors unless
@@ -109,11 +109,11 @@ fn setting(cameras: CameraPolicy, r: &Report) -> String {
 pub fn targets(st: &Studies, seed: u64, w: &mut String) {
     // The generalisation study runs the default set only.
     let Some(ours) = st.generalisation.first().map(|r| r.model_set.as_str()) else { return };
-    let mut rows = String::new();
+    let mut table = Table::new(["measure", "target", "cameras", "maps", "measured", "verdict", "fresh sample"]);
     for setting in SETTINGS {
-        target_rows(st, ours, setting, &mut rows);
+        target_rows(st, ours, setting, &mut table);
     }
-    if rows.is_empty() {
+    if table.is_empty() {
         return;
     }
     let _ = writeln!(w, "\n## Reading: the targets of perception that transfers\n");
@@ -122,20 +122,23 @@ pub fn targets(st: &Studies, seed: u64, w: &mut String) {
         "Scenario 3, 3 robots, the default set on the held-out floors ({HELDOUT_FLOORS}); every figure is from a table above. *Cameras*: fixed along each robot's spawn heading, or tracking the worker and looking round while it works; a floor is compared with the held-out floors under the same cameras. *Maps*: empty as each episode starts (a fleet's first seconds on a floor), or warm after {WARM_MAP_S} s of work (a fleet at work). A target is met on the point estimate; *beyond doubt* when its 95 % interval clears it too. *Fresh sample*: the same measure on floors and episodes no design was chosen on ({FRESH_FLOORS}, seed {}; the table above), where it was run. The whole tick's cost is a benchmark, not an evaluation: models/README.md.\n",
         seed + FRESH_SEED_OFFSET
     );
-    let _ = writeln!(w, "| measure | target | cameras | maps | measured | verdict | fresh sample |");
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|");
-    w.push_str(&rows);
+    let _ = write!(w, "{table}");
     bounds(st, ours, w);
 }
 
 /// The rows of [`targets`] whose runs exist, in one setting.
-fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), w: &mut String) {
+fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), table: &mut Table) {
     let all = scored_runs(st);
     let fresh_runs: Vec<&Report> = st.fresh.iter().collect();
     let Some(heldout) = find(&all, ours, HELDOUT_FLOORS, 3, (cameras, warm)) else { return };
     let fresh = find(&fresh_runs, ours, FRESH_FLOORS, 3, (cameras, warm));
     let (Some(collective), Some(cvm)) = (at(heldout, Scored::Collective), at(heldout, Scored::Cvm)) else { return };
-    let setting = setting(cameras, heldout);
+    let [cams, maps] = setting(cameras, heldout);
+    // A row: the measure, its target, the setting, then what was measured.
+    let mut row = |measure: String, target: String, measured: [String; 3]| {
+        let [value, verdict, fresh] = measured;
+        table.row([measure, target, cams.clone(), maps.clone(), value, verdict, fresh]);
+    };
     // A measure on the fresh sample: "+4.1, missed by 5.9 pts", or "–" where not run.
     let on_fresh = |measure: &dyn Fn(&Report) -> Option<(String, String)>| {
         fresh.and_then(measure).map_or("–".to_owned(), |(value, verdict)| format!("{value}, {verdict}"))
@@ -144,26 +147,31 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
         lead(r, Scored::Collective, Scored::Cvm)
             .map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, CVM_LEAD.value, None)))
     };
-    let _ = writeln!(
-        w,
-        "| collective − CVM at t | {target} | {setting} | {:+.1} (collective {}, CVM {}) | {} | {} |",
-        100.0 * (collective.0 - cvm.0),
-        with_ci(collective.0, collective.1),
-        with_ci(cvm.0, cvm.1),
-        verdict(collective.0 - cvm.0, CVM_LEAD.value, None),
-        on_fresh(&vs_cvm),
-        target = CVM_LEAD.stated(),
+    row(
+        "collective − CVM at t".into(),
+        CVM_LEAD.stated(),
+        [
+            format!(
+                "{:+.1} (collective {}, CVM {})",
+                100.0 * (collective.0 - cvm.0),
+                with_ci(collective.0, collective.1),
+                with_ci(cvm.0, cvm.1)
+            ),
+            verdict(collective.0 - cvm.0, CVM_LEAD.value, None),
+            on_fresh(&vs_cvm),
+        ],
     );
     for floors in VARIANT_FLOORS {
         if let Some(c) = find(&all, ours, floors, 3, (cameras, warm)).and_then(|r| at(r, Scored::Collective)) {
             let behind = collective.0 - c.0;
-            let _ = writeln!(
-                w,
-                "| collective at t on {floors}, behind the held-out floors | {target} | {setting} | {:.1} (collective {}) | {} | – |",
-                100.0 * behind,
-                with_ci(c.0, c.1),
-                verdict(-behind, -VARIANT_GAP.value, None),
-                target = VARIANT_GAP.stated(),
+            row(
+                format!("collective at t on {floors}, behind the held-out floors"),
+                VARIANT_GAP.stated(),
+                [
+                    format!("{:.1} (collective {})", 100.0 * behind, with_ci(c.0, c.1)),
+                    verdict(-behind, -VARIANT_GAP.value, None),
+                    "–".into(),
+                ],
             );
         }
     }
@@ -172,12 +180,7 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
             .map(|g| (format!("{:+.1}", 100.0 * g), verdict(g, EGO_LEAD.value, None)))
     };
     if let Some((value, verdict)) = vs_ego(heldout) {
-        let _ = writeln!(
-            w,
-            "| collective − ego at t | {target} | {setting} | {value} | {verdict} | {} |",
-            on_fresh(&vs_ego),
-            target = EGO_LEAD.stated(),
-        );
+        row("collective − ego at t".into(), EGO_LEAD.stated(), [value, verdict, on_fresh(&vs_ego)]);
     }
     let team: Vec<(f64, [f64; 2])> = (1..=4)
         .filter_map(|n| find(&all, ours, HELDOUT_FLOORS, n, (cameras, warm)))
@@ -185,23 +188,23 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
         .collect();
     if team.len() == 4 {
         let rising = team.windows(2).all(|p| p[1].0 > p[0].0);
-        let _ = writeln!(
-            w,
-            "| team, all ticks, 1 → 2 → 3 → 4 robots | rising at every step | {setting} | {} | {} | – |",
-            team.iter().map(|a| pct(a.0)).collect::<Vec<_>>().join(" → "),
-            if rising { "met" } else { "missed" }
+        row(
+            "team, all ticks, 1 → 2 → 3 → 4 robots".into(),
+            "rising at every step".into(),
+            [
+                team.iter().map(|a| pct(a.0)).collect::<Vec<_>>().join(" → "),
+                if rising { "met" } else { "missed" }.into(),
+                "–".into(),
+            ],
         );
         let three = team[2];
         let team_3 = |r: &Report| {
             at(r, Scored::TeamAllTicks).map(|a| (with_ci(a.0, a.1), verdict(a.0, TEAM_ALL_TICKS.value, Some(a.1[0]))))
         };
-        let _ = writeln!(
-            w,
-            "| team, all ticks, 3 robots | {target} | {setting} | {} | {} | {} |",
-            with_ci(three.0, three.1),
-            verdict(three.0, TEAM_ALL_TICKS.value, Some(three.1[0])),
-            on_fresh(&team_3),
-            target = TEAM_ALL_TICKS.stated(),
+        row(
+            "team, all ticks, 3 robots".into(),
+            TEAM_ALL_TICKS.stated(),
+            [with_ci(three.0, three.1), verdict(three.0, TEAM_ALL_TICKS.value, Some(three.1[0])), on_fresh(&team_3)],
         );
     }
     let farther = |r: &Report| {
@@ -210,11 +213,10 @@ fn target_rows(st: &Studies, ours: &str, (cameras, warm): (CameraPolicy, bool), 
             .map(|a| (with_ci(a.t, a.t_ci95), verdict(a.t, FARTHER_RECALL.value, Some(a.t_ci95[0]))))
     };
     if let Some((value, verdict)) = farther(heldout) {
-        let _ = writeln!(
-            w,
-            "| recall of the farther station of a close pair | {target} | {setting} | {value} | {verdict} | {} |",
-            on_fresh(&farther),
-            target = FARTHER_RECALL.stated(),
+        row(
+            "recall of the farther station of a close pair".into(),
+            FARTHER_RECALL.stated(),
+            [value, verdict, on_fresh(&farther)],
         );
     }
 }
@@ -279,29 +281,23 @@ fn bounds(st: &Studies, ours: &str, w: &mut String) {
         w,
         "Where the collective loses its points at t on the held-out floors (3 robots): each part of the worker's cycle costs its share of the collective's ticks times its error rate, so a row's parts add up to 100 − collective; in brackets the collective's and the CVM's accuracy there. *Goal off the map*: the ticks (across the parts) on which the goal is missing from the robot's team map, and the collective's accuracy on them. *Best of both*: the collective had it been, in every part, as good as the better of itself and the CVM handed the true work spots.\n"
     );
-    let phases: Vec<&str> = heldout[0].1.by_phase.iter().map(|p| p.phase).collect();
-    let _ = writeln!(
-        w,
-        "| cameras | maps | collective t | CVM + 10 | {} | goal off the map: share, collective t | best of both |",
-        phases.iter().map(|p| format!("lost: {p}")).collect::<Vec<_>>().join(" | ")
+    let phases = heldout[0].1.by_phase.iter().map(|p| format!("lost: {}", p.phase));
+    let cvm_target = format!("CVM + {:.0}", 100.0 * CVM_LEAD.value);
+    let mut table = Table::new(
+        ["cameras".to_owned(), "maps".into(), "collective t".into(), cvm_target]
+            .into_iter()
+            .chain(phases)
+            .chain(["goal off the map: share, collective t".to_owned(), "best of both".into()]),
     );
-    let _ = writeln!(w, "|---|---|---|---|{}---|---|", "---|".repeat(phases.len()));
     for ((cameras, _), r) in &heldout {
-        let parts: Vec<String> =
-            r.by_phase.iter().map(|p| format!("{:.1} ({} / {})", lost(p), pct(p.collective.t), pct(p.cvm.t))).collect();
+        let parts = r.by_phase.iter().map(|p| format!("{:.1} ({} / {})", lost(p), pct(p.collective.t), pct(p.cvm.t)));
         let unmapped = at(r, Scored::CollectiveGoalUnmapped).map_or("–".into(), |a| pct(a.0));
-        let _ = writeln!(
-            w,
-            "| {} | {} | {} | {} | {}, {unmapped} | {} |",
-            setting(*cameras, r),
-            pct(r.models[&Scored::Collective].t),
-            pct(r.models[&Scored::Cvm].t + CVM_LEAD.value),
-            parts.join(" | "),
-            pct(r.goal_unmapped_share),
-            pct(best_of_both(r))
-        );
+        let [cams, maps] = setting(*cameras, r);
+        let figures = [pct(r.models[&Scored::Collective].t), pct(r.models[&Scored::Cvm].t + CVM_LEAD.value)];
+        let last = [format!("{}, {unmapped}", pct(r.goal_unmapped_share)), pct(best_of_both(r))];
+        table.row([cams, maps].into_iter().chain(figures).chain(parts).chain(last));
     }
-    let _ = writeln!(w);
+    let _ = writeln!(w, "{table}");
     vs_cvm_bound(&heldout, w);
     variant_bounds(&all, ours, &heldout, w);
     sharing_bound(&heldout, w);
