@@ -136,6 +136,20 @@ mod tests {
         }
     }
 
+    /// The worked example of docs/PROTOCOL.md, byte for byte: if the encoding
+    /// changes, that page (and every client built from it) must change with it.
+    #[test]
+    fn the_worked_example_of_the_protocol_page_is_what_the_codec_writes() {
+        let map =
+            MapMsg { robot: RobotId::new("r1").unwrap(), instance: 7, stations: [Some([1.0, 2.0]), None, None, None] };
+        let bytes = encode(&map);
+        let expected: Vec<u8> =
+            vec![0x09, 0x02, 0x72, 0x31, 0x07, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00];
+        assert_eq!(bytes, expected);
+        assert_eq!(PROTOCOL_VERSION, 9, "docs/PROTOCOL.md names version 9 and its first byte");
+        assert_eq!(decode::<MapMsg>(&bytes).unwrap(), map);
+    }
+
     #[test]
     fn round_trip() {
         let v = vote();
