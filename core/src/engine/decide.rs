@@ -5,8 +5,16 @@
 //! Membership decides whom to wait for: live members (liveliness) that have spoken at
 //! least once, so a peer that joins never stalls a tick, and one that leaves is not
 //! waited for. Each ballot weighs the trust its receiver learned of its voter, never
-//! what the voter says of itself; since that trust is learned from the ballots decided
-//! on alone, robots that counted the same ballots weigh them alike. The decision names a
+//! what the voter says of itself.
+//!
+//! Trust is learned from each tick's ballots, but not at once: a tick's lesson is every
+//! vote held for it [`LESSON_LAG`] ticks later, the ones that came after the decision
+//! (relayed, answered) included, and every robot learns it as it decides the tick that
+//! many ticks on, weighing its ballots by the trust it holds then. A robot that decided
+//! a tick without a vote lost on its link still learns from it once the vote comes in,
+//! so robots whose ballots differed for a moment learn alike, and robots that learned
+//! alike weigh the next ballots alike: agreement does not drift apart tick after tick.
+//! Nothing in a lesson is any peer's word about the others. The decision names a
 //! digest of the ballots counted; each robot's next share carries it in brief
 //! ([`Verdict`]), so comparing verdicts measures how often the team agrees without any
 //! robot hearing every peer's decisions.
@@ -16,7 +24,15 @@ use super::{Engine, Output, Tick};
 use crate::consensus::{self, Ballot};
 use crate::metrics::{Metrics, Stage};
 use spwi_proto::*;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
+
+/// How many ticks after a tick its votes are learned from (see the module doc): the
+/// relays, asks and answers of a tick are over well before then.
+pub const LESSON_LAG: u64 = 2;
+
+/// A decided tick's votes, waiting to be learned from; late votes join it.
+pub(super) type Lesson = BTreeMap<RobotId, VoteMsg>;
 
 impl Engine {
     pub(super) fn advance_all(&mut self, now: Duration, out: &mut Vec<Output>) {
@@ -57,6 +73,7 @@ impl Engine {
         }
         let mut tick = self.open.remove(&t).expect("open");
         let t0 = Instant::now();
+        self.learn_lessons_before(t);
         // Each ballot weighs what we learned of its voter. Voters we doubt are set
         // aside while one we trust votes, and never decide a tick for the team while
         // a trusted member (we at least) is live: the tick then goes without a class.
@@ -77,10 +94,7 @@ impl Engine {
         let digest = consensus::digest(&counted);
         let voters: Vec<RobotId> = counted.iter().map(|b| b.robot.clone()).collect();
         self.metrics.votes_set_aside += (all.len() - counted.len()) as u64;
-        self.trust.learn(&all); // tick.votes is a map by robot: `all` is in robot order
-        let estimates: Vec<(&RobotId, &WorkerEstimate)> =
-            tick.votes.values().filter_map(|v| Some((&v.robot, v.worker.as_ref()?))).collect();
-        self.trust.learn_tracks(&estimates);
+        self.lessons.insert(t, tick.votes.clone());
         self.metrics.observe(Stage::Consensus, t0.elapsed());
         if let Some(arrived) = tick.own_frame {
             self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(arrived));
@@ -111,6 +125,29 @@ impl Engine {
         self.decided.insert(t, ours);
         self.last_decision = Some(d.clone());
         out.push(Output::Decision(d));
+    }
+
+    /// Learns, in tick order, every lesson [`LESSON_LAG`] or more ticks before tick `t`:
+    /// each voter judged against the others ([`crate::trust`]), its ballot weighing the
+    /// trust held now, the same on every robot that learned the same lessons.
+    fn learn_lessons_before(&mut self, t: u64) {
+        while let Some(entry) = self.lessons.first_entry().filter(|e| e.key() + LESSON_LAG <= t) {
+            let votes = entry.remove();
+            // A map by robot: the ballots are in robot order, as learning wants them.
+            let ballots: Vec<Ballot<'_>> = votes.values().map(|v| Ballot::of(v, self.trust.weight(&v.robot))).collect();
+            self.trust.learn(&ballots);
+            let estimates: Vec<(&RobotId, &WorkerEstimate)> =
+                votes.values().filter_map(|v| Some((&v.robot, v.worker.as_ref()?))).collect();
+            self.trust.learn_tracks(&estimates);
+        }
+    }
+
+    /// A vote for a tick we decided already: it joins the tick's lesson if it has none
+    /// from its voter yet.
+    pub(super) fn late_vote(&mut self, v: VoteMsg) {
+        if let Some(lesson) = self.lessons.get_mut(&v.tick) {
+            lesson.entry(v.robot.clone()).or_insert(v);
+        }
     }
 
     /// A peer's verdict against ours for its tick, now or when we decide it.

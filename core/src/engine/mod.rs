@@ -114,6 +114,8 @@ pub struct Engine {
     metrics: Metrics,
     /// Instance ids of other daemons seen using our robot id.
     duplicates: BTreeSet<u64>,
+    /// Decided ticks' votes, to learn from [`decide::LESSON_LAG`] ticks later.
+    lessons: BTreeMap<u64, decide::Lesson>,
     /// Each live peer's instance, as it last spoke to us directly: the only one whose
     /// relayed votes count.
     instances: BTreeMap<RobotId, u64>,
@@ -174,6 +176,7 @@ impl Engine {
             trust,
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
+            lessons: BTreeMap::new(),
             instances: BTreeMap::new(),
             peer_clocks: BTreeMap::new(),
             warned_off_clock: None,

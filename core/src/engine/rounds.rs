@@ -65,15 +65,19 @@ impl Engine {
             .filter(|v| v.robot != me && !self.peer_is_stale(&v.robot))
             .partition(|v| v.robot == relayer || self.is_live_instance(&v.robot, v.instance));
         self.metrics.foreign_votes += foreign.len() as u64;
-        if let Some(tick) = self.accept_peer(&b.robot, b.instance, b.tick, now) {
-            let mut used = 0;
-            for v in usable {
-                if let std::collections::btree_map::Entry::Vacant(slot) = tick.votes.entry(v.robot.clone()) {
-                    slot.insert(v);
-                    used += 1;
+        match self.accept_peer(&b.robot, b.instance, b.tick, now) {
+            Some(tick) => {
+                let mut used = 0;
+                for v in usable {
+                    if let std::collections::btree_map::Entry::Vacant(slot) = tick.votes.entry(v.robot.clone()) {
+                        slot.insert(v);
+                        used += 1;
+                    }
                 }
+                self.metrics.relayed_ballots_used += used;
             }
-            self.metrics.relayed_ballots_used += used;
+            // Decided already: what we lacked still joins what we learn from the tick.
+            None => usable.into_iter().for_each(|v| self.late_vote(v)),
         }
         self.advance(b.tick, now, out);
     }

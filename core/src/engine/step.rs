@@ -184,20 +184,27 @@ impl Engine {
             };
             self.peer_views.insert(e.robot.clone(), view);
         }
-        if let Some(tick) = self.accept_peer(&e.robot, e.instance, e.tick, now) {
-            match e.vote {
-                // A stale peer is heard as one that abstains. Its own copy of its vote
-                // wins over one a peer relayed; of its own copies, the first.
-                Some(v) if !stale => {
-                    if tick.heard_directly.insert(e.robot.clone()) {
-                        tick.votes.insert(e.robot.clone(), v);
+        match self.accept_peer(&e.robot, e.instance, e.tick, now) {
+            Some(tick) => {
+                match e.vote {
+                    // A stale peer is heard as one that abstains. Its own copy of its
+                    // vote wins over one a peer relayed; of its own copies, the first.
+                    Some(v) if !stale => {
+                        if tick.heard_directly.insert(e.robot.clone()) {
+                            tick.votes.insert(e.robot.clone(), v);
+                        }
+                    }
+                    _ => {
+                        tick.abstaining.insert(e.robot.clone());
                     }
                 }
-                _ => {
-                    tick.abstaining.insert(e.robot.clone());
-                }
+                self.advance(e.tick, now, out);
             }
-            self.advance(e.tick, now, out);
+            // A peer's vote for a tick we decided joins what we learn from the tick.
+            None => match e.vote {
+                Some(v) if from_peer && !stale && self.is_live_instance(&e.robot, e.instance) => self.late_vote(v),
+                _ => {}
+            },
         }
     }
 
