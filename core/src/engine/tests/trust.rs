@@ -138,3 +138,45 @@ fn robots_that_counted_the_same_ballots_weigh_them_alike() {
     assert!(ta[&id("d")] < 0.5, "{ta:?}");
     assert_eq!(a.last_decision().unwrap().digest, e.last_decision().unwrap().digest);
 }
+
+/// Robot `e` loses the liar d's share on every fifth tick and decides it at the
+/// deadline without d's vote, which a relay of b's brings in only after: it still
+/// learns from that tick what `a`, which heard everything, learns, so the two hold the
+/// same trust of d while it is still falling.
+#[test]
+fn robots_that_counted_different_ballots_for_a_moment_still_learn_alike() {
+    let set = models();
+    let (mut a, mut e) = (engine("a", &set), engine("e", &set));
+    for x in [&mut a, &mut e] {
+        for p in ["b", "c", "d"] {
+            x.handle(Input::MemberJoined(id(p)), ms(0));
+        }
+    }
+    with_a_confident_liar(&mut a, 1..=40);
+    let honest = || vec![StepVote { class: Station::Workstation, confidence: 0.8 }; 3];
+    let mut differed = 0;
+    for t in 1..=40u64 {
+        let now = ms(100 * t);
+        e.handle(Input::Frame(frame("e", t, false)), now);
+        for p in ["b", "c"] {
+            e.handle(Input::Embedding(share(p, t, None, Some(honest()), None)), now + ms(1));
+        }
+        let mut liar =
+            share("d", t, None, Some(vec![StepVote { class: Station::Manufacturing, confidence: 1.0 }; 3]), None);
+        let v = liar.vote.as_mut().unwrap();
+        (v.visibility, v.quality) = (10_000, 1.0);
+        if t % 5 == 0 {
+            let out = e.handle(Input::Poll, now + ms(61));
+            assert!(decisions(&out).iter().all(|d| !d.voters.contains(&id("d"))), "decided without d");
+            differed += 1;
+            let relayed = BallotsMsg { robot: id("b"), instance: 2, tick: t, votes: vec![liar.vote.unwrap()] };
+            e.handle(Input::Ballots(relayed), now + ms(80));
+        } else {
+            e.handle(Input::Embedding(liar), now + ms(1));
+        }
+    }
+    assert_eq!(differed, 8);
+    let (ta, te) = (a.trust(), e.trust());
+    assert!(ta[&id("d")] > 0.1 && ta[&id("d")] < 0.5, "still falling: {ta:?}");
+    assert_eq!(ta, te, "the late votes joined what e learned");
+}
