@@ -46,6 +46,7 @@ pub enum Output {
     /// Our team map, for a robot that just joined.
     Map(MapMsg),
 }
+
 /// The topics a robot reads: its own detections, and its peers' shares, ballots and
 /// maps. Votes alone and decisions are for observers: a robot reads both in its peers'
 /// shares (the vote inside, the verdict in brief).
