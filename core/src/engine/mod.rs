@@ -14,7 +14,7 @@
 //! still missing a vote ─► Ballots out again, a few times before the deadline
 //! a vote from every active member that said it votes, or the deadline passed
 //!       ─► consensus ─► Decision out (naming a digest of the ballots counted)    decide.rs
-//!       ─► trust: each voter judged against the others
+//!       ─► trust, two ticks on: each voter judged against the others
 //! ```
 //!
 //! The rooms: [`config`] (the rules an engine runs by), [`io`] (inputs, outputs and
