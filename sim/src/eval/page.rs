@@ -46,8 +46,8 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             acc(r, Scored::TeamAllTicks).0,
             acc(r, Scored::Gnn).0,
             acc(r, Scored::Ego).0,
-            c.to_string(),
-            cf.to_string(),
+            c,
+            cf,
             acc(r, Scored::Consensus).0,
             p.to_string(),
         ]);
@@ -62,13 +62,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 (Some(v), Some(ci)) => with_ci(v, ci),
                 _ => "–".into(),
             };
-            table.row([
-                p.robot.to_string(),
-                pct(p.gnn),
-                f(&p.ego).to_string(),
-                f(&p.collective).to_string(),
-                future.to_string(),
-            ]);
+            table.row([p.robot.to_string(), pct(p.gnn), f(&p.ego), f(&p.collective), future]);
         }
         let _ = write!(w, "{table}");
         let _ = writeln!(
@@ -88,7 +82,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             (Scored::TeamAllTicks, "Team, all ticks", "–"),
         ] {
             let (t, f) = acc(r, name);
-            table.row([label.to_string(), t.to_string(), f.to_string(), paper.to_string()]);
+            table.row([label.to_string(), t, f, paper.to_string()]);
         }
         let _ = write!(w, "{table}");
         if !r.close_pair.is_empty() {
@@ -107,7 +101,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 Scored::CvmFarther,
             ] {
                 let (t, f) = acc_in(&r.close_pair, name);
-                table.row([name.to_string(), t.to_string(), f.to_string()]);
+                table.row([name.to_string(), t, f]);
             }
             let _ = write!(w, "{table}");
             let _ = writeln!(
@@ -124,13 +118,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             for p in &r.by_phase {
                 let c = |a: &super::score::Accuracy| with_ci(a.t, a.t_ci95);
                 let share = format!("{:.1}", 100.0 * p.share);
-                table.row([
-                    p.phase.to_string(),
-                    share.to_string(),
-                    c(&p.collective).to_string(),
-                    c(&p.ego).to_string(),
-                    c(&p.cvm).to_string(),
-                ]);
+                table.row([p.phase.to_string(), share, c(&p.collective), c(&p.ego), c(&p.cvm)]);
             }
             let _ = write!(w, "{table}");
         }
@@ -187,8 +175,8 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 r.horizon as f64 * spwi_proto::TICK_PERIOD.as_secs_f64()
             ),
             r.robots.to_string(),
-            c.to_string(),
-            cf.to_string(),
+            c,
+            cf,
             acc(r, Scored::Ego).0,
             acc(r, Scored::TeamAllTicks).0,
         ]);
@@ -251,12 +239,12 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
         };
         let (c, cf) = acc(r, Scored::Consensus);
         table.row([
-            what.to_string(),
-            protocol.to_string(),
+            what,
+            protocol,
             acc(r, Scored::TeamAllTicks).0,
             acc(r, Scored::HealthyCollective).0,
-            c.to_string(),
-            cf.to_string(),
+            c,
+            cf,
             pct(r.agreement),
             trust_split(r),
             format!("{:.2} / {:.0}", r.messages_per_robot_tick, r.bytes_per_robot_tick),
@@ -319,13 +307,13 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
             let cameras = r.cameras.map_or("mixed cameras".to_owned(), |p| format!("{p:?} cameras"));
             table.row([
                 r.model_set.to_string(),
-                cameras.to_string(),
+                cameras,
                 r.robots.to_string(),
                 acc(r, Scored::TeamAllTicks).0,
                 pct(r.coverage),
                 acc(r, Scored::Ego).0,
                 acc(r, Scored::Collective).0,
-                gap.to_string(),
+                gap,
                 acc(r, Scored::Consensus).0,
                 acc(r, Scored::Cvm).0,
                 acc(r, Scored::CvmMapped).0,
@@ -364,7 +352,7 @@ pub fn markdown(st: &Studies, command: &str, s: &Settings, figures: Option<&Path
                 table.row([
                     r.floors.to_string(),
                     r.robots.to_string(),
-                    maps.to_string(),
+                    maps,
                     acc(r, Scored::TeamAllTicks).0,
                     pct(r.coverage),
                     acc(r, Scored::Ego).0,
@@ -438,7 +426,7 @@ fn fresh_sample(st: &Studies, seed: u64, w: &mut String) {
             table.row([
                 r.floors.to_string(),
                 r.seed.to_string(),
-                maps.to_string(),
+                maps,
                 acc(r, Scored::TeamAllTicks).0,
                 pct(r.coverage),
                 acc(r, Scored::Ego).0,
