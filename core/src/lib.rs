@@ -26,7 +26,9 @@
 //! - [`clock`]: the fleet's clock: ticks as periods of a synchronised wall clock, and the
 //!   window of ticks a robot takes input for;
 //! - [`graph`], [`temporal`], [`vote`], [`consensus`]: the pipeline stages;
-//! - [`trust`]: what each robot learned of every voter from the ballots it decided on;
+//! - [`trust`]: what each robot learned of every voter from the ballots it decided on,
+//!   and [`hindsight`], from the station the worker then stayed at;
+//! - [`sight`]: what a receiver can check of a vote's view;
 //! - [`stale`]: feeds that repeat themselves (a frozen camera), set aside;
 //! - [`floor`]: back-projection, the shared worker track and station map, relations;
 //! - [`model`], [`manifest`]: ONNX models (tract by default, ONNX Runtime with `ort`);
@@ -40,10 +42,12 @@ pub mod engine;
 pub mod floor;
 pub mod graph;
 pub mod hash;
+pub mod hindsight;
 pub mod manifest;
 pub mod metrics;
 pub mod model;
 pub mod settings;
+pub mod sight;
 pub mod stale;
 pub mod temporal;
 pub mod trust;

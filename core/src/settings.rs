@@ -24,8 +24,9 @@ pub struct TickConfig {
     /// for a member's vote sends the ballots it holds, which asks the tick's relayers
     /// for the missing vote; also the most answers a robot gives a tick (0: neither).
     pub ask_rounds: u32,
-    /// A camera showing the same worker detection this many frames in a row is frozen:
-    /// set aside until it changes (0: never).
+    /// A camera showing, this many frames in a row, worker detections it showed before
+    /// (the last frame's, or any of the last minute's) is frozen or playing back a clip:
+    /// set aside until it shows new ones (0: never).
     pub stale_after_frames: u32,
     /// How votes become the decision: "paper" (normalised shares of visibility and
     /// confidence) or "trust" (evidence weighted by each voter's record and view).

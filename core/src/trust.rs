@@ -16,7 +16,14 @@
 //!   votes much like its peers — they all read the same team track — but places the
 //!   worker somewhere else.
 //!
-//! Trust is the product of the two, never below `floor`, so a robot that was wrong for
+//! - **hindsight**: once the worker stays at a station, each vote of its way there is
+//!   judged right or wrong by that station ([`crate::hindsight`]), where some voter
+//!   named it. This judges a voter even when nobody else voted beside it (a confident
+//!   liar beside one honest camera), which the other two records cannot. It counts
+//!   only against a voter right less often than [`RIGHT_ENOUGH`] (by its moving
+//!   average): an honest camera's mistakes are no reason to weigh it less.
+//!
+//! Trust is the product of the three, never below `floor`, so a robot that was wrong for
 //! a while still counts a little and, being judged all the while, earns its trust back
 //! once its camera recovers. A judgement that lowers a record moves it twice as far as
 //! one that raises it: trust is lost faster than it is earned. A robot starts at
@@ -69,18 +76,31 @@ pub const WEIGHT_STEPS: f32 = 16.0;
 /// its first judged disagreement sets it aside.
 pub const UNJUDGED: f32 = 0.5;
 
-/// Moving averages of one robot's agreement with the others.
+/// Down to this record of being right in hindsight (a moving average in which a wrong
+/// vote weighs twice a right one, so about two right in three), a voter keeps its full
+/// weight; below, its weight falls in proportion. A voter that names one station
+/// whatever the worker does is right about one time in four.
+pub const RIGHT_ENOUGH: f32 = 0.5;
+
+/// Moving averages of one robot's agreement with the others, and with hindsight.
 #[derive(Debug, Clone, Copy)]
 struct Record {
     votes: f32,
     track: f32,
+    hindsight: f32,
+    /// Votes judged in hindsight so far.
+    hindsight_judged: u32,
 }
 
 impl Default for Record {
     fn default() -> Self {
-        Record { votes: UNJUDGED, track: 1.0 }
+        Record { votes: UNJUDGED, track: 1.0, hindsight: 1.0, hindsight_judged: 0 }
     }
 }
+
+/// Votes judged in hindsight, right often enough, before a voter counts as established
+/// by hindsight alone (a second of votes).
+pub const PROVEN_IN_HINDSIGHT: u32 = 10;
 
 #[derive(Debug, Clone)]
 pub struct TrustBook {
@@ -97,7 +117,8 @@ impl TrustBook {
     /// The trust of `robot`: [`UNJUDGED`] until it has been judged.
     pub fn of(&self, robot: &RobotId) -> f32 {
         let r = self.records.get(robot).copied().unwrap_or_default();
-        (r.votes * r.track).max(self.cfg.floor)
+        let hindsight = (r.hindsight / RIGHT_ENOUGH).min(1.0);
+        (r.votes * r.track * hindsight).max(self.cfg.floor)
     }
 
     /// A peer we fuse the embeddings and worker estimates of.
@@ -111,12 +132,15 @@ impl TrustBook {
         ((self.of(robot) * WEIGHT_STEPS).round() / WEIGHT_STEPS).max(1.0 / WEIGHT_STEPS)
     }
 
-    /// A voter the team has seen agree more than disagree: trusted above
-    /// [`UNJUDGED`] (by its rounded weight). Only such a voter decides a tick alone
-    /// while other members are live: a newcomer — or a member that turned liar before
-    /// anyone saw it agree — has no such say.
+    /// A voter the team has seen agree more than disagree — trusted above
+    /// [`UNJUDGED`] (by its rounded weight) — or seen right in hindsight
+    /// ([`PROVEN_IN_HINDSIGHT`] votes judged, right often enough). Only such a voter
+    /// decides a tick alone while another trusted member is live: a newcomer — or a
+    /// member that turned liar before anyone judged it — has no such say.
     pub fn established(&self, robot: &RobotId) -> bool {
-        self.weight(robot) > UNJUDGED
+        let r = self.records.get(robot).copied().unwrap_or_default();
+        let proven = r.hindsight_judged >= PROVEN_IN_HINDSIGHT && r.hindsight >= RIGHT_ENOUGH && self.counts(robot);
+        self.weight(robot) > UNJUDGED || proven
     }
 
     /// A voter whose ballot is counted while a trusted voter's is: its rounded
@@ -154,6 +178,24 @@ impl TrustBook {
     pub fn learn_track(&mut self, robot: &RobotId, agrees: bool) {
         let window = self.cfg.window;
         Self::judged(window, &mut self.record(robot).track, f32::from(u8::from(agrees)));
+    }
+
+    /// Sets the record of `robot`'s votes, as if judged so (tests that need a robot
+    /// the team has seen agree).
+    #[cfg(test)]
+    pub(crate) fn set_votes_record(&mut self, robot: &RobotId, votes: f32) {
+        self.record(robot).votes = votes;
+    }
+
+    /// Takes what hindsight judged ([`crate::hindsight::Hindsight::learn`]): whether
+    /// each vote named the station the worker then stayed at.
+    pub fn learn_hindsight(&mut self, judged: &[(RobotId, bool)]) {
+        let window = self.cfg.window;
+        for (robot, right) in judged {
+            let record = self.record(robot);
+            Self::judged(window, &mut record.hindsight, f32::from(u8::from(*right)));
+            record.hindsight_judged = record.hindsight_judged.saturating_add(1);
+        }
     }
 
     /// Judges the worker estimates of a decided tick's ballots against each other, when
@@ -309,6 +351,22 @@ mod tests {
         assert_eq!(book.of(&ids[2]), 0.1, "0.5 × 0.98^100 = 0.07, floored");
         assert!(!book.counts(&ids[2]) && book.counts(&ids[0]));
         assert_eq!(book.weight(&ids[2]), 0.125, "0.1 rounded to sixteenths");
+    }
+
+    #[test]
+    fn a_voter_wrong_in_hindsight_loses_weight_only_once_it_is_right_less_than_enough() {
+        let mut book = TrustBook::new(TrustConfig { window: 10, ..TrustConfig::default() });
+        let (honest, liar) = (id("honest"), id("liar"));
+        // One wrong in four: its record stays above 0.5, full weight.
+        for _ in 0..30 {
+            let (right, wrong) = ((honest.clone(), true), (honest.clone(), false));
+            book.learn_hindsight(&[right.clone(), right.clone(), right, wrong]);
+            book.learn_hindsight(&[(liar.clone(), false)]);
+        }
+        assert_eq!(book.of(&honest), UNJUDGED, "votes unjudged, hindsight at full weight");
+        assert!(book.counts(&honest));
+        assert_eq!(book.of(&liar), 0.1, "always wrong: floored");
+        assert!(!book.counts(&liar));
     }
 
     #[test]

@@ -5,8 +5,8 @@
 //!   `world --stuck-slot`). A frame repeated exactly gives it away.
 //! - [`LoopingCamera`]: once it has seen the worker it records [`LOOP_TICKS`] frames
 //!   and then plays them back over and over (`eval --looping`): every frame differs
-//!   from the last, so no check for repeats catches it; only its record of
-//!   disagreeing with the other robots does.
+//!   from the last, but each was shown before, which gives it away once the clip comes
+//!   round (`spwi_core::stale`).
 
 use spwi_proto::DetectionFrame;
 

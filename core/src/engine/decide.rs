@@ -14,7 +14,9 @@
 //! a tick without a vote lost on its link still learns from it once the vote comes in,
 //! so robots whose ballots differed for a moment learn alike, and robots that learned
 //! alike weigh the next ballots alike: agreement does not drift apart tick after tick.
-//! Nothing in a lesson is any peer's word about the others. The decision names a
+//! Nothing in a lesson is any peer's word about the others. Each lesson also waits,
+//! with the ones before it, for the worker to stay at a station ([`crate::hindsight`]):
+//! then each of their votes is judged by it. The decision names a
 //! digest of the ballots counted; each robot's next share carries it in brief
 //! ([`Verdict`]), so comparing verdicts measures how often the team agrees without any
 //! robot hearing every peer's decisions.
@@ -23,6 +25,7 @@ use super::rounds::{ballots, ANSWERED_TICKS};
 use super::{Engine, Output, Tick};
 use crate::consensus::{self, Ballot};
 use crate::metrics::{Metrics, Stage};
+use crate::sight;
 use spwi_proto::*;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -74,19 +77,22 @@ impl Engine {
         let mut tick = self.open.remove(&t).expect("open");
         let t0 = Instant::now();
         self.learn_lessons_before(t);
-        // Each ballot weighs what we learned of its voter. Voters we doubt are set
+        // Each ballot weighs what we learned of its voter, and the view the tick's
+        // estimates bear out ([`sight`]). Voters we doubt are set
         // aside while one we trust votes, and never decide a tick for the team while
         // a trusted member (we at least) is live: the tick then goes without a class.
-        let all: Vec<Ballot<'_>> = tick.votes.values().map(|v| Ballot::of(v, self.trust.weight(&v.robot))).collect();
+        let votes: Vec<&VoteMsg> = tick.votes.values().collect();
+        let all = sight::ballots(&votes, |r| self.trust.weight(r));
         let trusted = |b: &&Ballot<'_>| self.trust.counts(b.robot);
         let members = || std::iter::once(&self.cfg.robot).chain(self.live.iter());
         let anyone_trusted = all.iter().any(|b| trusted(&b)) || members().any(|r| self.trust.counts(r));
         let mut counted: Vec<Ballot<'_>> = all.iter().filter(|b| !anyone_trusted || trusted(b)).copied().collect();
-        // Nor does a voter not yet established decide a tick alone while a member the
-        // team has seen agree is live.
+        // Nor does a voter not yet established decide a tick alone while another
+        // member we trust is live: the tick goes without a class until the team has
+        // judged it.
         if let [alone] = counted[..] {
-            let others_established = members().any(|m| m != alone.robot && self.trust.established(m));
-            if others_established && !self.trust.established(alone.robot) {
+            let others_trusted = members().any(|m| m != alone.robot && self.trust.counts(m));
+            if others_trusted && !self.trust.established(alone.robot) {
                 counted.clear();
             }
         }
@@ -139,6 +145,12 @@ impl Engine {
             let estimates: Vec<(&RobotId, &WorkerEstimate)> =
                 votes.values().filter_map(|v| Some((&v.robot, v.worker.as_ref()?))).collect();
             self.trust.learn_tracks(&estimates);
+            // Where the voters we believe put the worker, for hindsight.
+            let worker: Vec<&WorkerEstimate> =
+                estimates.iter().filter(|(r, _)| self.trust.fuses(r)).map(|(_, e)| *e).collect();
+            let named = votes.values().filter_map(|v| Some((v.robot.clone(), v.steps.first()?.class))).collect();
+            let judged = self.hindsight.learn(named, &worker, &self.floor.team_map.stations());
+            self.trust.learn_hindsight(&judged);
         }
     }
 

@@ -41,6 +41,7 @@ use step::PeerView;
 use crate::clock::PeerClock;
 use crate::floor::{FloorView, StationMap};
 use crate::graph::GraphBuilder;
+use crate::hindsight::Hindsight;
 use crate::metrics::Metrics;
 use crate::model::Inference;
 use crate::stale::Repeats;
@@ -104,9 +105,9 @@ pub struct Engine {
     /// The latest decided ticks, their ballots kept to answer peers' asks.
     settled: BTreeMap<u64, Tick>,
     /// Our own feed: the worker's box and keypoints, frame after frame.
-    own_feed: Repeats<(BBox, Vec<f32>)>,
+    own_feed: Repeats,
     /// Each peer's feed: its embeddings.
-    peer_feeds: BTreeMap<RobotId, Repeats<Vec<f32>>>,
+    peer_feeds: BTreeMap<RobotId, Repeats>,
     /// Each peer's latest share.
     peer_views: BTreeMap<RobotId, PeerView>,
     /// Every robot's record of agreeing with the others, ours included.
@@ -116,6 +117,8 @@ pub struct Engine {
     duplicates: BTreeSet<u64>,
     /// Decided ticks' votes, to learn from [`decide::LESSON_LAG`] ticks later.
     lessons: BTreeMap<u64, decide::Lesson>,
+    /// Learned lessons' votes, waiting to be judged by where the worker stays.
+    hindsight: Hindsight,
     /// Each live peer's instance, as it last spoke to us directly: the only one whose
     /// relayed votes count.
     instances: BTreeMap<RobotId, u64>,
@@ -177,6 +180,7 @@ impl Engine {
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
             lessons: BTreeMap::new(),
+            hindsight: Hindsight::default(),
             instances: BTreeMap::new(),
             peer_clocks: BTreeMap::new(),
             warned_off_clock: None,

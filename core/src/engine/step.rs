@@ -72,14 +72,18 @@ impl Engine {
         }
         self.metrics.frames += 1;
         let was_stale = self.feed_is_stale();
-        self.own_feed.see(f.human.as_ref().map(|h| (h.bbox, h.keypoints.clone())));
+        let detection = f.human.as_ref().map(|h| {
+            let b = h.bbox;
+            [b.x, b.y, b.w, b.h].into_iter().chain(h.keypoints.iter().copied())
+        });
+        self.own_feed.see(detection);
         let stale = self.feed_is_stale();
         if stale != was_stale {
             if stale {
                 tracing::warn!(
                     tick = tick,
                     repeats = self.cfg.stale_after,
-                    "our camera repeats the same worker detection: a frozen feed; not voting until it changes"
+                    "our camera repeats worker detections it showed before: a frozen or looping feed; not voting until it changes"
                 );
             } else {
                 tracing::info!(tick = tick, "our camera's feed changes again: voting");
@@ -163,7 +167,7 @@ impl Engine {
             self.instances.insert(e.robot.clone(), e.instance);
         }
         if from_peer {
-            self.peer_feeds.entry(e.robot.clone()).or_default().see(e.embedding.clone());
+            self.peer_feeds.entry(e.robot.clone()).or_default().see(e.embedding.as_deref().map(|x| x.iter().copied()));
             if let Some(theirs) = e.verdict.take() {
                 self.compare(&e.robot, theirs);
             }

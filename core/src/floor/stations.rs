@@ -39,7 +39,7 @@ const STATION_RADIUS_M: f32 = 4.0;
 /// Clusters kept; beyond, the least seen of those not on the map goes first.
 const MAX_CLUSTERS: usize = 256;
 /// Ticks of standing still (1 s) before the worker counts as at work.
-const DWELL_TICKS: usize = 10;
+pub const DWELL_TICKS: usize = 10;
 /// The worker stands still while its track's last [`DWELL_TICKS`] positions all lie
 /// within this of their mean (m): the track's velocity is too noisy to tell.
 const STILL_RADIUS_M: f32 = 0.35;
@@ -116,8 +116,46 @@ pub struct StationMap {
     spots: [WorkSpot; NUM_CLASSES],
     /// Where peers' maps put each station: the mean of what they sent.
     borrowed: [WorkSpot; NUM_CLASSES],
-    /// The worker's last positions, while tracked well, oldest first.
+    /// Whether the worker, while tracked well, stands still.
+    dwell: Dwell,
+}
+
+/// The worker's last [`DWELL_TICKS`] positions: whether it stands still, as it does at
+/// work. The track's velocity is too noisy to tell; its positions are not.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Dwell {
     recent: VecDeque<[f32; 2]>,
+}
+
+impl Dwell {
+    /// Forgets the positions held (the worker was lost).
+    pub fn clear(&mut self) {
+        self.recent.clear();
+    }
+
+    /// Takes the worker's position this tick; returns where it stood still over the last
+    /// [`DWELL_TICKS`] (their mean, all within [`STILL_RADIUS_M`] of it), if it did.
+    pub fn observe(&mut self, position: [f32; 2]) -> Option<[f32; 2]> {
+        if self.recent.len() == DWELL_TICKS {
+            self.recent.pop_front();
+        }
+        self.recent.push_back(position);
+        if self.recent.len() < DWELL_TICKS {
+            return None;
+        }
+        let n = self.recent.len() as f32;
+        let mean = self.recent.iter().fold([0.0, 0.0], |m, p| [m[0] + p[0] / n, m[1] + p[1] / n]);
+        self.recent.iter().all(|&p| dist(p, mean) <= STILL_RADIUS_M).then_some(mean)
+    }
+}
+
+/// The station a worker standing at `at` works at: the one of `places` (where each
+/// station's objects or work spot lie, several per station allowed) nearest it within
+/// [`AT_OBJECTS_M`], unless another station's lies nearly as near ([`AMBIGUOUS_M`]).
+pub fn at_one_station(at: [f32; 2], places: impl Iterator<Item = ([f32; 2], Station)> + Clone) -> Option<Station> {
+    let near = || places.clone().map(|(p, station)| (dist(p, at), station));
+    let (d, station) = near().min_by(|a, b| a.0.total_cmp(&b.0)).filter(|(d, _)| *d <= AT_OBJECTS_M)?;
+    (!near().any(|(e, other)| other != station && e <= d + AMBIGUOUS_M)).then_some(station)
 }
 
 fn dist(a: [f32; 2], b: [f32; 2]) -> f32 {
@@ -155,26 +193,12 @@ impl StationMap {
     /// work spot is.
     pub fn observe_worker(&mut self, worker: Option<&WorkerEstimate>) {
         let Some(w) = worker.filter(|w| w.covariance[0].max(0.0).sqrt() <= SPOT_SIGMA_M) else {
-            self.recent.clear();
+            self.dwell.clear();
             return;
         };
-        if self.recent.len() == DWELL_TICKS {
-            self.recent.pop_front();
-        }
-        self.recent.push_back(w.position);
-        if self.recent.len() < DWELL_TICKS {
-            return;
-        }
-        let n = self.recent.len() as f32;
-        let mean = self.recent.iter().fold([0.0, 0.0], |m, p| [m[0] + p[0] / n, m[1] + p[1] / n]);
-        if self.recent.iter().any(|&p| dist(p, mean) > STILL_RADIUS_M) {
-            return;
-        }
-        let near = || self.clusters.iter().filter(|c| c.counts).map(|c| (dist(c.mean(), mean), c.station));
-        let Some((d, station)) = near().min_by(|a, b| a.0.total_cmp(&b.0)).filter(|(d, _)| *d <= AT_OBJECTS_M) else {
-            return;
-        };
-        if !near().any(|(e, other)| other != station && e <= d + AMBIGUOUS_M) {
+        let Some(still) = self.dwell.observe(w.position) else { return };
+        let counted = self.clusters.iter().filter(|c| c.counts).map(|c| (c.mean(), c.station));
+        if let Some(station) = at_one_station(still, counted) {
             self.spots[station.index()].add(w.position);
         }
     }

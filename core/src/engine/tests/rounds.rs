@@ -251,7 +251,9 @@ fn a_relayed_vote_counts_only_for_its_origins_live_instance_and_its_own_copy_win
     for p in ["b", "c"] {
         a.handle(Input::MemberJoined(id(p)), ms(0));
     }
-    // b and c speak directly (instance 2); tick 1 is decided.
+    // b and c speak directly (instance 2); tick 1 is decided. b is established, so its
+    // vote alone decides a tick.
+    a.trust.set_votes_record(&id("b"), 1.0);
     a.handle(abstaining("b", 1), ms(100));
     a.handle(abstaining("c", 1), ms(100));
     a.handle(Input::Frame(frame("a", 1, false)), ms(100));

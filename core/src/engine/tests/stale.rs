@@ -32,9 +32,30 @@ fn a_frozen_camera_stops_voting_until_it_changes() {
 }
 
 #[test]
+fn a_camera_playing_back_a_clip_stops_voting_once_the_clip_comes_round() {
+    let set = models();
+    let mut a = engine("a", &set);
+    let clip: Vec<DetectionFrame> = (1..=20).map(|t| frame("a", t, true)).collect();
+    for t in 1..=20u64 {
+        take_vote(&a.handle(Input::Frame(frame("a", t, true)), ms(100 * t)));
+    }
+    // From tick 21 it shows its first 20 frames again, each stamped with the tick.
+    for t in 21..=40u64 {
+        let old = &clip[(t as usize - 21) % clip.len()];
+        let replayed = DetectionFrame { capture_us: DetectionFrame::capture_at_tick(t), ..old.clone() };
+        let e = take_embedding(&a.handle(Input::Frame(replayed), ms(100 * t)));
+        // stale after 5: tick 20's new frame and the four shown before, from tick 24
+        assert_eq!(e.vote.is_some(), t < 24, "tick {t}");
+    }
+    assert!(a.feed_is_stale());
+    take_vote(&a.handle(Input::Frame(frame("a", 41, true)), ms(4100)));
+}
+
+#[test]
 fn a_peer_whose_embedding_repeats_is_heard_as_abstaining() {
     let set = models();
     let mut b = engine("b", &set);
+    b.trust.set_votes_record(&id("b"), 1.0); // established: decides a tick alone
     b.handle(Input::MemberJoined(id("a")), ms(0));
     let frozen = take_embedding(&engine("a", &set).handle(Input::Frame(frame("a", 1, true)), ms(100)));
     let vote_of_a = |tick| VoteMsg {

@@ -93,6 +93,7 @@ fn a_relation_set_votes_from_a_fresh_track_and_says_so() {
     assert!(e.worker.is_none() && e.vote.is_none());
     // A peer is waited for until its share of the tick comes, with its vote or without.
     let mut b = engine("b", &set);
+    b.trust.set_votes_record(&id("b"), 1.0); // established: decides a tick alone
     b.handle(Input::MemberJoined(id("a")), ms(0));
     let from_a = |tick, votes: bool| {
         let vote =

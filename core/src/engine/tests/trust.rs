@@ -180,3 +180,55 @@ fn robots_that_counted_different_ballots_for_a_moment_still_learn_alike() {
     assert!(ta[&id("d")] > 0.1 && ta[&id("d")] < 0.5, "still falling: {ta:?}");
     assert_eq!(ta, te, "the late votes joined what e learned");
 }
+
+/// Robot a, which does not see the worker, hears b — honest, placing the worker on its
+/// way from the workstation to assembly and then standing there — and d, naming
+/// manufacturing every tick, sure of it and placing the worker nowhere. Neither was ever
+/// judged, and nobody else votes, so their ballots cannot tell who is wrong.
+#[test]
+fn a_liar_beside_one_honest_voter_is_outweighed_by_what_we_check_and_judged_in_hindsight() {
+    use crate::floor::StationMap;
+    let set = models();
+    let mut a = engine("a", &set);
+    for p in ["b", "d"] {
+        a.handle(Input::MemberJoined(id(p)), ms(0));
+    }
+    // The team's map: storage, workstation, assembly, manufacturing.
+    let mut team = StationMap::default();
+    team.borrow(&[Some([0.0, -8.0]), Some([0.0, 0.0]), Some([8.0, 0.0]), Some([8.0, 8.0])]);
+    a.adopt_maps(StationMap::default(), team);
+    let worker_at = |t: u64| {
+        let x = (0.2 * t as f32).min(8.0); // walks 2 m/s, stands at assembly from tick 40
+        WorkerEstimate { position: [x, 0.0], velocity: [0.0; 2], covariance: [0.04, 0.0, 0.5] }
+    };
+    let sure = |class| vec![StepVote { class, confidence: 1.0 }; 3];
+    let tick = |a: &mut Engine, t: u64, b_votes: bool, d_votes: bool| {
+        let now = ms(100 * t);
+        let honest = b_votes.then(|| vec![StepVote { class: Station::Assembly, confidence: 0.7 }; 3]);
+        let mut from_b = share("b", t, None, honest, Some(worker_at(t)));
+        if let Some(v) = from_b.vote.as_mut() {
+            v.worker = Some(worker_at(t));
+        }
+        let from_d = share("d", t, None, d_votes.then(|| sure(Station::Manufacturing)), None);
+        let mut out = a.handle(Input::Embedding(from_b), now);
+        out.extend(a.handle(Input::Embedding(from_d), now));
+        out.extend(a.handle(Input::Frame(frame("a", t, false)), now));
+        out.extend(a.handle(Input::Poll, now + ms(99)));
+        decisions(&out).first().map(|d| (d.voters.clone(), d.steps.first().map(|s| s.class)))
+    };
+    // Both vote: d's vote, sure as it is, weighs a tenth of its claim beside b's, which
+    // places the worker.
+    let (voters, class) = tick(&mut a, 1, true, true).expect("decided");
+    assert_eq!((voters, class), (vec![id("b"), id("d")], Some(Station::Assembly)));
+    // d alone, while b (trusted as much, not established either) is live: no class.
+    assert_eq!(tick(&mut a, 2, false, true), Some((vec![], None)), "an unjudged voter decides no tick alone");
+    for t in 3..=60 {
+        tick(&mut a, t, true, true);
+    }
+    // The worker stood at assembly from tick 40: every vote since tick 1 is judged.
+    let trust = a.trust();
+    assert!(trust[&id("d")] < 0.3 && !a.trust.counts(&id("d")), "d was always wrong: {trust:?}");
+    assert!(a.trust.established(&id("b")), "b was right: {trust:?}");
+    assert_eq!(tick(&mut a, 61, true, false), Some((vec![id("b")], Some(Station::Assembly))), "b decides alone now");
+    assert_eq!(tick(&mut a, 62, false, true), Some((vec![], None)), "d never does");
+}
