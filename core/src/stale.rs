@@ -23,12 +23,10 @@ pub struct Repeats {
 
 impl Repeats {
     /// Takes the feed's next value (`None`: nothing to compare, e.g. no worker in view,
-    /// which ends a run of repeats).
+    /// which neither ends a run of repeats nor adds to it: a clip played back with gaps
+    /// in it stays a clip).
     pub fn see(&mut self, value: Option<impl IntoIterator<Item = f32>>) {
-        let Some(value) = value else {
-            self.count = 0;
-            return;
-        };
+        let Some(value) = value else { return };
         let mut h = Fnv1a::default();
         for x in value {
             h.eat(&x.to_bits().to_le_bytes());
@@ -62,10 +60,12 @@ mod tests {
         assert!(r.is_stale(3) && !r.is_stale(0), "third identical value: stale (0 never is)");
         r.see(Some([1.0, 2.000001]));
         assert!(!r.is_stale(3), "a change, however small, is a live feed");
-        r.see(Some([1.0, 2.000001]));
         r.see(None::<[f32; 2]>);
+        assert!(!r.is_stale(2), "a frame without a value adds nothing");
         r.see(Some([1.0, 2.000001]));
-        assert!(!r.is_stale(2), "a frame without the value breaks the run");
+        assert!(r.is_stale(2), "nor does it break the run: the value was seen before");
+        r.see(None::<[f32; 2]>);
+        assert!(r.is_stale(2), "still stale until a new value comes");
     }
 
     #[test]
