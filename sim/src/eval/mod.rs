@@ -801,18 +801,29 @@ mod tests {
     }
 
     #[test]
-    fn a_camera_looping_an_old_clip_earns_less_trust_than_the_others() {
+    fn a_camera_looping_an_old_clip_is_set_aside_and_unchecked_earns_less_trust() {
         // 4 robots, 30 s episodes: robot 0 records 5 s after it first sees the worker,
-        // then replays them; its estimates of the worker disagree with the others'.
-        let o = EvalOptions {
+        // then replays them. Its engine recognises detections it showed before and
+        // stops voting; without that check its estimates of the worker disagree with
+        // the others' and it earns less trust.
+        let looping = || EvalOptions {
             robots: 4,
             ticks: 300,
             episodes: 2,
             ..options(fixture(), Faults { looping: 1, ..Faults::none() })
         };
-        let r = run(&o).unwrap();
-        let trust: Vec<f64> = r.per_robot.iter().map(|p| p.trust.expect("every robot voted")).collect();
+        let mut unchecked = looping();
+        unchecked.tick.stale_after_frames = 0;
+        let unchecked = run(&unchecked).unwrap();
+        let trust: Vec<f64> = unchecked.per_robot.iter().map(|p| p.trust.expect("every robot voted")).collect();
         assert!(trust[0] < 0.9 && trust[1..].iter().all(|&t| t > trust[0]), "{trust:?}");
+        let checked = run(&looping()).unwrap();
+        assert!(
+            checked.samples < unchecked.samples,
+            "robot 0's replayed frames are not scored as seeing the worker: {} vs {}",
+            checked.samples,
+            unchecked.samples
+        );
     }
 
     #[test]
