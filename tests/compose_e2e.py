@@ -19,7 +19,11 @@ host over the Docker network):
    dropped (iptables' statistic match in each container's network namespace): the
    fleet keeps deciding; agreement is measured (at least 97 % at 10 %);
 7. a fresh fleet whose world freezes one robot's camera (tests/compose-stuck.yaml):
-   that robot reports its feed stale and leaves the vote, the fleet keeps deciding.
+   that robot reports its feed stale and leaves the vote, the fleet keeps deciding;
+8. on that fleet, the operator revokes one robot and admits a new one while it runs
+   (`spwi-agent fleet revoke | add` on the shared fleet directory, which every process
+   reads again within a second): the others drop the revoked robot within 5 s and it
+   leaves; a container started as the newly admitted robot-17 is counted by all.
 
 Prints each measured time. Tears the project down at the end, even on failure.
 Only the Python standard library and the docker CLI are needed.
@@ -135,8 +139,13 @@ def agreement(ips, seconds=3.0):
     common = set.intersection(*(set(b) for b in by_tick))
     if len(common) < 10:
         fail(f"only {len(common)} ticks decided by all {len(ips)} agents in the last 10 s")
-    same = sum(1 for t in common if len({b[t] for b in by_tick}) == 1)
-    return same / len(common), len(common)
+    split = sorted(t for t in common if len({b[t] for b in by_tick}) > 1)
+    if split:
+        robots = [r["robot"] for r in recents]
+        print(f"  ticks decided differently ({len(split)}), class by robot {robots}:")
+        for t in split[:20]:
+            print(f"    {t}: {[b[t] for b in by_tick]}")
+    return 1 - len(split) / len(common), len(common)
 
 
 def steady_agreement(ips, seconds):
@@ -245,6 +254,47 @@ def rogues(ips):
     finally:
         for n in started:
             sh("docker", "rm", "-f", n, check=False)
+
+
+def roster_changes():
+    ag = agents()
+    sts = {c: must_status(ip) for c, (_, ip) in ag.items()}
+    victim = next(c for c, s in sts.items() if not s["feed_stale"])
+    operator = next(c for c in ag if c != victim)  # any container holding the fleet volume
+    revoked = sts[victim]["robot"]
+    version = sts[operator]["roster_version"]
+    rest = [ip for c, (_, ip) in ag.items() if c != victim]
+    fleet_dir = "/var/lib/spwi/fleet"
+    sh("docker", "exec", operator, "spwi-agent", "fleet", "revoke", "--robot", revoked, "--dir", fleet_dir)
+    _, took = wait_until(f"the other 3 dropping the revoked {revoked}", all_count(rest, 3), 10, poll=0.05)
+    print(f"revoked while running: the other 3 drop {revoked} {took:.2f} s after `fleet revoke`")
+    figures["revoke_s"] = round(took, 2)
+    if took > 5.0:
+        fail(f"the revoked robot was still counted {took:.2f} s after `fleet revoke` (> 5 s)")
+    wait_until(f"{revoked}'s agent to leave",
+               lambda: sh("docker", "inspect", "-f", "{{.State.Running}}", victim) == "false", 15, poll=0.2)
+    logs = subprocess.run(["docker", "logs", "--tail", "20", victim], capture_output=True, text=True)
+    said = logs.stdout + logs.stderr  # the agent logs to stderr
+    if "revoked" not in said:
+        fail(f"{revoked}'s agent left without saying it was revoked: {said[-500:]}")
+    keeps_deciding(rest, 3)
+
+    newcomer = "robot-17"
+    sh("docker", "exec", operator, "spwi-agent", "fleet", "add", "--robot", newcomer, "--dir", fleet_dir)
+    wait_until("every agent holding the new roster",
+               lambda: all(must_status(ip)["roster_version"] == version + 2 for ip in rest), 10, poll=0.1)
+    image = os.environ.get("SPWI_IMAGE", "spwi:latest")
+    name = f"{PROJECT}-{newcomer}"
+    sh("docker", "run", "-d", "--name", name, "--network", NETWORK, "-v", f"{PROJECT}_fleet:{fleet_dir}",
+       image, "--fleet-dir", fleet_dir, "--robot-id", newcomer)
+    try:
+        _, took = wait_until(f"every agent counting the admitted {newcomer}", all_count(rest, 4), 30, poll=0.1)
+        print(f"admitted while running: {newcomer} counted by the other 3 {took:.1f} s after its container started "
+              f"(roster version {version} -> {version + 2}, no restart)")
+        figures["admit_s"] = round(took, 1)
+        decisions_advance(rest)
+    finally:
+        sh("docker", "rm", "-f", name, check=False)
 
 
 def stuck_camera():
@@ -373,6 +423,9 @@ def main():
 
     # 7. a camera stuck on one frame
     stuck_camera()
+
+    # 8. a robot revoked and one admitted while the fleet runs
+    roster_changes()
     print("figures: " + json.dumps(figures))
 
 

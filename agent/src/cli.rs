@@ -247,7 +247,7 @@ pub fn main() -> ExitCode {
     let mut args = Args::parse();
     if let Some(Command::Fleet(cmd)) = args.command.take() {
         init_tracing(LogFormat::Human);
-        return run_main("spwi-agent fleet", async { crate::fleet::cli::run(cmd) });
+        return run_main("spwi-agent fleet", crate::fleet::cli::run(cmd));
     }
     if let Some(addr) = args.probe {
         return if probe(addr) { ExitCode::SUCCESS } else { ExitCode::FAILURE };

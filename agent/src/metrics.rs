@@ -26,6 +26,12 @@ pub enum DropReason {
     Invalid,
     RobotMismatch,
     ForgedRelayedVote,
+    /// From a robot the roster held does not admit (revoked, or admitted after us and
+    /// not yet in our roster).
+    NotAdmitted,
+    /// A vote its origin signed for a tick for which it signed another: proof that it
+    /// told different robots different things.
+    EquivocatedVote,
     QueueFull,
 }
 
@@ -40,6 +46,8 @@ impl DropReason {
             DropReason::Invalid => "invalid",
             DropReason::RobotMismatch => "robot_mismatch",
             DropReason::ForgedRelayedVote => "forged_relayed_vote",
+            DropReason::NotAdmitted => "not_admitted",
+            DropReason::EquivocatedVote => "equivocated_vote",
             DropReason::QueueFull => "queue_full",
         }
     }
@@ -61,7 +69,7 @@ impl From<&DecodeError> for DropReason {
 /// Registers every counter and histogram of the engine, as they stand, in `registry` (the
 /// scrape's own: see [`exposition`]); `members` is the live member count.
 pub fn register_engine(m: &Metrics, registry: &mut Registry, members: usize) {
-    let counters: [(&str, &str, u64); 21] = [
+    let counters: [(&str, &str, u64); 27] = [
         ("spwi_frames", "detection frames processed", m.frames),
         ("spwi_frames_with_worker", "frames in which the worker was seen", m.frames_with_worker),
         ("spwi_decisions", "team decisions published", m.decisions),
@@ -95,6 +103,24 @@ pub fn register_engine(m: &Metrics, registry: &mut Registry, members: usize) {
             m.foreign_votes,
         ),
         ("spwi_votes_set_aside", "votes not counted: their voter's trust is below the threshold", m.votes_set_aside),
+        (
+            "spwi_lone_stranger_ticks",
+            "ticks left without a class: a lone voter not yet established while a trusted member was live",
+            m.lone_stranger_ticks,
+        ),
+        (
+            "spwi_doubted_only_ticks",
+            "ticks left without a class: every voter trusted below the threshold while a trusted member was live",
+            m.doubted_only_ticks,
+        ),
+        ("spwi_histories_asked", "the team's history asked for while this robot was new", m.histories_asked),
+        ("spwi_histories_sent", "our recent lessons sent to a member that asked for them", m.histories_sent),
+        (
+            "spwi_histories_ignored",
+            "peers' histories that taught us nothing (not from a live member, or for ticks out of reach)",
+            m.histories_ignored,
+        ),
+        ("spwi_history_votes_learned", "votes of others learned from peers' histories", m.history_votes_learned),
     ];
     for (name, help, v) in counters {
         registry.register(name, help, ConstCounter::new(v));
@@ -122,6 +148,10 @@ pub struct TransportCounters {
     pub bad_messages: BTreeMap<DropReason, u64>,
     /// Outgoing messages dropped because Zenoh held up the publisher task.
     pub outgoing_dropped: u64,
+    /// Rosters adopted while running, and rosters refused (not the CA's, another
+    /// fleet's, unreadable), in a secured fleet.
+    pub rosters_adopted: u64,
+    pub rosters_refused: u64,
 }
 
 impl TransportCounters {
@@ -133,7 +163,7 @@ impl TransportCounters {
         self.bad_messages.values().sum()
     }
 
-    /// Registers both counters in `registry`.
+    /// Registers the counters in `registry`.
     pub fn register(&self, registry: &mut Registry) {
         let reasons = self.bad_messages.iter().map(|(r, &n)| (r.label().to_owned(), ConstCounter::new(n)));
         registry.register(
@@ -145,6 +175,16 @@ impl TransportCounters {
             "spwi_outgoing_dropped",
             "outgoing messages dropped while Zenoh held up publishing",
             ConstCounter::new(self.outgoing_dropped),
+        );
+        registry.register(
+            "spwi_rosters_adopted",
+            "newer signed rosters adopted while running",
+            ConstCounter::new(self.rosters_adopted),
+        );
+        registry.register(
+            "spwi_rosters_refused",
+            "rosters refused: not signed by the fleet's CA, of another fleet, or unreadable",
+            ConstCounter::new(self.rosters_refused),
         );
     }
 }

@@ -6,16 +6,21 @@
 //! way to reproduce a field incident on a desk, bit for bit, its judgement of its peers
 //! (trust, frozen feeds) included.
 //!
-//! Channels (message encoding `spwi-bincode-v1`: the `proto` codec's bytes):
+//! Every channel's messages are JSON, and every channel carries the JSON Schema of what
+//! it holds (schema encoding `jsonschema`, named after the message type), so a viewer
+//! decodes each message by field: Foxglove's raw-message, plot and state panels show a
+//! robot's decisions, votes, membership and where it places the worker. The messages
+//! are the wire protocol's (docs/PROTOCOL.md) as JSON: stations as numbers, enums by
+//! name, `null` for none; each `f32` reads back to the same bits, so replay is exact.
 //!
-//! | topic | payload |
+//! | topic | payload (schema) |
 //! |---|---|
-//! | `/spwi/config` | the engine configuration and model set name (JSON, once) |
-//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/ballots`, `/spwi/in/map` | a received message |
-//! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (JSON) |
-//! | `/spwi/in/poll` | empty: time passed |
-//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map` | a published message |
-//! | `/spwi/state` | after each decision, whom the robot trusts and whose feed it sets aside ([`PeerState`], JSON) |
+//! | `/spwi/config` | the engine configuration and model set name (`RecordedConfig`, once) |
+//! | `/spwi/in/detections`, `/spwi/in/embedding`, `/spwi/in/ballots`, `/spwi/in/map`, `/spwi/in/history` | a received message (`DetectionFrame`, `EmbeddingMsg`, `BallotsMsg`, `MapMsg`, `HistoryMsg`) |
+//! | `/spwi/in/membership` | `{"robot": …, "alive": …}` (`Membership`) |
+//! | `/spwi/in/poll` | `{}`: time passed (`Poll`) |
+//! | `/spwi/out/embedding`, `/spwi/out/vote`, `/spwi/out/ballots`, `/spwi/out/decision`, `/spwi/out/map`, `/spwi/out/history` | a published message (`EmbeddingMsg`, `VoteMsg`, `BallotsMsg`, `DecisionMsg`, `MapMsg`, `HistoryMsg`) |
+//! | `/spwi/state` | after each decision, whom the robot trusts and whose feed it sets aside (`PeerState`) |
 //!
 //! Log and publish times are nanoseconds of engine time: the fleet's clock, time since
 //! the Unix epoch.
@@ -26,6 +31,7 @@ use spwi_core::engine::io::TOPICS_READ;
 use spwi_core::engine::{Engine, EngineConfig, Input, Output};
 use spwi_core::model::ModelSet;
 use spwi_proto::keys::Topic;
+use spwi_proto::{BallotsMsg, DecisionMsg, DetectionFrame, EmbeddingMsg, HistoryMsg, MapMsg, VoteMsg};
 use spwi_proto::{RobotId, PROTOCOL_VERSION};
 use std::collections::BTreeMap;
 use std::fs::File;
@@ -34,15 +40,19 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
-const BINCODE: &str = "spwi-bincode-v1";
+/// Every channel's message encoding, and its schemas' encoding.
+const JSON: &str = "json";
+const JSON_SCHEMA: &str = "jsonschema";
 
 /// What `/spwi/config` holds.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct RecordedConfig {
     /// The wire protocol the run spoke ([`spwi_proto::PROTOCOL_VERSION`]): a recording
     /// of another protocol is refused rather than misread (absent before protocol 9).
     #[serde(default)]
     pub protocol: u16,
+    /// The engine's configuration (`spwi_core::engine::EngineConfig`).
+    #[schemars(with = "serde_json::Map<String, serde_json::Value>")]
     pub engine: EngineConfig,
     pub model_set: String,
 }
@@ -51,7 +61,7 @@ pub struct RecordedConfig {
 /// learned of each robot (itself included), whether its own camera is frozen, and whose
 /// feeds it leaves out. Recorded so that a replay is checked on these too, and so that
 /// a recording opened in Foxglove shows why a robot's vote weighed what it did.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PeerState {
     pub tick: u64,
     pub trust: BTreeMap<RobotId, f32>,
@@ -73,11 +83,17 @@ impl PeerState {
     }
 }
 
-#[derive(Serialize, Deserialize)]
+/// A member joined (`alive`) or left.
+#[derive(Serialize, Deserialize, schemars::JsonSchema)]
+#[schemars(rename = "Membership")]
 struct MembershipRecord {
     robot: RobotId,
     alive: bool,
 }
+
+/// Time passed: the engine was polled (its deadlines checked).
+#[derive(Serialize, Deserialize, schemars::JsonSchema)]
+struct Poll {}
 
 /// Writes a run to an MCAP file.
 pub struct Recorder {
@@ -125,10 +141,25 @@ impl Channel {
         }
     }
 
-    fn encoding(self) -> &'static str {
+    /// The name and JSON Schema of what the channel holds.
+    fn schema(self) -> (String, Vec<u8>) {
+        fn of<T: schemars::JsonSchema>() -> (String, Vec<u8>) {
+            (T::schema_name().into_owned(), serde_json::to_vec(&schemars::schema_for!(T)).expect("a schema"))
+        }
         match self {
-            Channel::Config | Channel::InMembership | Channel::State => "json",
-            _ => BINCODE,
+            Channel::Config => of::<RecordedConfig>(),
+            Channel::In(t) | Channel::Out(t) => match t {
+                Topic::Detections => of::<DetectionFrame>(),
+                Topic::Embedding => of::<EmbeddingMsg>(),
+                Topic::Vote => of::<VoteMsg>(),
+                Topic::Decision => of::<DecisionMsg>(),
+                Topic::Ballots => of::<BallotsMsg>(),
+                Topic::Map => of::<MapMsg>(),
+                Topic::History => of::<HistoryMsg>(),
+            },
+            Channel::InMembership => of::<MembershipRecord>(),
+            Channel::InPoll => of::<Poll>(),
+            Channel::State => of::<PeerState>(),
         }
     }
 
@@ -147,7 +178,9 @@ impl Recorder {
             .map_err(|e| anyhow!("{}: {e}", path.display()))?;
         let mut channels = Vec::new();
         for c in Channel::all() {
-            channels.push((c, writer.add_channel(0, &c.topic(), c.encoding(), &BTreeMap::new())?));
+            let (name, schema) = c.schema();
+            let schema = writer.add_schema(&name, JSON_SCHEMA, &schema)?;
+            channels.push((c, writer.add_channel(schema, &c.topic(), JSON, &BTreeMap::new())?));
         }
         let mut r = Recorder { writer, channels, sequence: 0 };
         r.write(Channel::Config, Duration::ZERO, &serde_json::to_vec(config)?)?;
@@ -168,8 +201,8 @@ impl Recorder {
     }
 
     pub fn input(&mut self, input: &Input, now: Duration) -> Result<()> {
-        if let Some((topic, bytes)) = input.to_wire() {
-            return self.write(Channel::In(topic), now, &bytes);
+        if let Some((topic, json)) = input.to_recording() {
+            return self.write(Channel::In(topic), now, &json);
         }
         match input {
             Input::MemberJoined(r) | Input::MemberLeft(r) => {
@@ -177,13 +210,13 @@ impl Recorder {
                 let json = serde_json::to_vec(&MembershipRecord { robot: r.clone(), alive })?;
                 self.write(Channel::InMembership, now, &json)
             }
-            _ => self.write(Channel::InPoll, now, &[]),
+            _ => self.write(Channel::InPoll, now, &serde_json::to_vec(&Poll {})?),
         }
     }
 
     pub fn output(&mut self, output: &Output, now: Duration) -> Result<()> {
-        let (topic, bytes) = output.to_wire();
-        self.write(Channel::Out(topic), now, &bytes)
+        let (topic, json) = output.to_recording();
+        self.write(Channel::Out(topic), now, &json)
     }
 
     pub fn state(&mut self, state: &PeerState, now: Duration) -> Result<()> {
@@ -225,6 +258,15 @@ pub fn read(path: &Path) -> Result<Recording> {
         let now = Duration::from_nanos(m.log_time);
         let ctx = || format!("{}: record {} on {}", path.display(), m.sequence, m.channel.topic);
         let d = &m.data[..];
+        if m.channel.message_encoding != JSON {
+            bail!(
+                "{}: channel {} holds {:?} messages, not JSON: recorded by an older build; replay it with the \
+                 build that made it, or record again",
+                path.display(),
+                m.channel.topic,
+                m.channel.message_encoding
+            );
+        }
         match Channel::of_topic(&m.channel.topic) {
             Some(Channel::Config) => {
                 let raw: serde_json::Value = serde_json::from_slice(d).with_context(ctx)?;

@@ -6,9 +6,13 @@
 //! down, the robots already connected keep their links and keep deciding; robots that
 //! start while it is down find no one until it is back. It is Zenoh's own router mode
 //! (what `zenohd` runs, without plugins), so no extra program has to be installed.
+//! In a secured fleet it takes a newer signed roster while it runs, as every member
+//! does ([`crate::fleet::live`]), and reopens with its access rules: the robots' links
+//! to it drop for a moment and come back (they talk to each other directly meanwhile).
 
 use crate::cli::{init_tracing, spawn_signal_handler};
 use crate::config::LogFormat;
+use crate::fleet::live::{self, Watch};
 use crate::fleet::Role;
 use anyhow::{anyhow, Result};
 use clap::Parser;
@@ -43,13 +47,37 @@ async fn run(args: Args) -> Result<()> {
         vec![r#"mode:"router""#.to_owned(), format!("listen/endpoints:{}", serde_json::to_string(&[&args.listen])?)];
     overrides.extend(args.cfg);
     let mut config = crate::zenoh_config::build_router(args.zenoh_config.as_deref(), &overrides)?;
-    crate::fleet::secure_or_warn(&mut config, args.fleet_dir.as_deref(), &args.identity, Role::Router, "spwi-router")?;
-    let session = zenoh::open(config).await.map_err(|e| anyhow!("cannot start the Zenoh router: {e}"))?;
-    tracing::info!(listen = %args.listen, zid = %session.zid(), "router up");
+    let credentials = crate::fleet::secure_or_warn(
+        &mut config,
+        args.fleet_dir.as_deref(),
+        &args.identity,
+        Role::Router,
+        "spwi-router",
+    )?;
+    let mut roster = credentials.map(Watch::new);
     let (tx, mut rx) = watch::channel(false);
     spawn_signal_handler(tx);
-    let _ = rx.wait_for(|stop| *stop).await;
-    session.close().await.map_err(|e| anyhow!("closing the router session: {e}"))?;
+    loop {
+        let session = zenoh::open(config.clone()).await.map_err(|e| anyhow!("cannot start the Zenoh router: {e}"))?;
+        if let Some(w) = roster.as_mut() {
+            w.listen(&session).await?;
+        }
+        tracing::info!(listen = %args.listen, zid = %session.zid(), "router up");
+        let adopted = tokio::select! {
+            _ = rx.wait_for(|stop| *stop) => None,
+            adopted = live::adopted(roster.as_mut(), &session) => Some(adopted),
+        };
+        if let Some(Ok(a)) = &adopted {
+            tokio::time::sleep(live::reopen_delay(&a.credentials.identity.name)).await;
+            crate::fleet::secure::apply(&mut config, &a.credentials)?;
+        }
+        session.close().await.map_err(|e| anyhow!("closing the router session: {e}"))?;
+        match adopted {
+            None => break,
+            Some(Err(e)) => return Err(e),
+            Some(Ok(_)) => tracing::info!("reopening with the new roster's access rules"),
+        }
+    }
     tracing::info!("router stopped");
     Ok(())
 }

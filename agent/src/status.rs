@@ -16,12 +16,25 @@ use std::time::{Duration, Instant};
 /// tick by tick from outside, e.g. in the container end-to-end test.
 pub const RECENT_DECISIONS: usize = 100;
 
-/// One decided tick: the team's class at t, none when no member saw the worker.
+/// One decided tick: the team's class at t, none when no member saw the worker, as its
+/// number and its name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 pub struct RecentDecision {
     pub tick: u64,
     pub class: Option<Station>,
+    pub station: Option<&'static str>,
 }
+
+impl RecentDecision {
+    pub fn of(d: &DecisionMsg) -> RecentDecision {
+        let class = d.steps.first().map(|s| s.class);
+        RecentDecision { tick: d.tick, class, station: class.map(Station::name) }
+    }
+}
+
+/// The stations' names by class number, the legend of the numbers in `/status`.
+pub const STATION_NAMES: [&str; 4] =
+    [Station::Storage.name(), Station::Workstation.name(), Station::Assembly.name(), Station::Manufacturing.name()];
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Status {
@@ -38,9 +51,15 @@ pub struct Status {
     /// Who may join: the identity this daemon presents in a secured fleet (mutual TLS,
     /// access control from the roster); `None` in an open fleet.
     pub identity: Option<String>,
+    /// The version of the signed roster this daemon holds (`None`: an open fleet).
+    pub roster_version: Option<u64>,
+    /// When that roster was taken: at start, or adopted while running (RFC 3339, UTC).
+    pub roster_adopted_at: Option<String>,
     /// Live members, this robot included.
     pub members: Vec<RobotId>,
     pub last_decision: Option<DecisionMsg>,
+    /// The name of each station class the decisions number (`stations[class]`).
+    pub stations: [&'static str; 4],
     /// The latest decisions, oldest first.
     pub recent_decisions: VecDeque<RecentDecision>,
     /// Instance ids of other live daemons that use this robot's id.

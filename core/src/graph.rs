@@ -147,7 +147,7 @@ impl GraphBuilder {
     /// (the system is only activated when a human is detected). `floor` is read by a
     /// [`NodeFeatures::FloorRelations`] builder only, and only with the frame's pose.
     pub fn build(&mut self, frame: &DetectionFrame, floor: Option<OnFloor<'_>>) -> Option<&StarGraph> {
-        let human = frame.human.as_ref()?;
+        let human = frame.worker()?;
         let n_max = self.graph.max_nodes;
         let diag = (frame.image_size[0].powi(2) + frame.image_size[1].powi(2)).sqrt();
         let (hx, hy) = human.bbox.center();
@@ -236,11 +236,12 @@ mod tests {
             capture_us: 1,
             pose: None,
             image_size: [300.0, 400.0], // diagonal 500
-            human: Some(HumanDetection {
+            humans: vec![HumanDetection {
                 bbox: BBox { x: 90.0, y: 90.0, w: 20.0, h: 20.0 }, // centre (100, 100)
                 keypoints: vec![0.0; KEYPOINT_VALUES],
                 feature: feature(9.0),
-            }),
+                track: None,
+            }],
             objects: objects
                 .iter()
                 .enumerate()
@@ -258,7 +259,7 @@ mod tests {
     #[test]
     fn no_worker_no_graph() {
         let mut f = frame(&[(10.0, 10.0)]);
-        f.human = None;
+        f.humans.clear();
         assert!(GraphBuilder::new(4, EdgeWeight::Proximity, NodeFeatures::Appearance).build(&f, None).is_none());
     }
 
@@ -328,11 +329,12 @@ mod floor_tests {
             capture_us: 1,
             pose: Some(pose),
             image_size: [cam.image[0] as f32, cam.image[1] as f32],
-            human: Some(HumanDetection {
+            humans: vec![HumanDetection {
                 bbox: BBox { x: 300.0, y: 150.0, w: 40.0, h: 120.0 },
                 keypoints: vec![0.0; KEYPOINT_VALUES],
                 feature: vec![9.0; FEATURE_DIM],
-            }),
+                track: None,
+            }],
             objects: vec![
                 object(BBox { x: 500.0, y: 400.0, w: 60.0, h: 80.0 }, 2.0), // bottom at the image's edge
                 object(BBox { x: u - 20.0, y: v - 30.0, w: 40.0, h: 30.0 }, 1.0),
@@ -375,7 +377,7 @@ mod floor_tests {
 
     /// Object `i`'s image distance to the worker, normalised by the diagonal.
     fn g_image_distance(f: &DetectionFrame, i: usize) -> f32 {
-        let (hx, hy) = f.human.as_ref().unwrap().bbox.center();
+        let (hx, hy) = f.humans[0].bbox.center();
         let (ox, oy) = f.objects[i].bbox.center();
         (ox - hx).hypot(oy - hy) / f.image_size[0].hypot(f.image_size[1])
     }

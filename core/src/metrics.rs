@@ -129,6 +129,21 @@ pub struct Metrics {
     pub foreign_votes: u64,
     /// Votes not counted: their voter's trust is below the counting threshold.
     pub votes_set_aside: u64,
+    /// Ticks decided without a class although a vote came: its lone voter was not
+    /// established while another trusted member was live (the lone-voter rule).
+    pub lone_stranger_ticks: u64,
+    /// Ticks decided without a class although votes came: every voter was trusted
+    /// below the counting threshold while a trusted member was live.
+    pub doubted_only_ticks: u64,
+    /// The team's history asked for while we were new (engine/history.rs).
+    pub histories_asked: u64,
+    /// Our lessons sent to members that asked.
+    pub histories_sent: u64,
+    /// Peers' histories that taught us nothing: from no live member, or for ticks out
+    /// of reach or ours (a robot that has run a while takes none).
+    pub histories_ignored: u64,
+    /// Votes of others learned from peers' histories.
+    pub history_votes_learned: u64,
     pub stages: BTreeMap<Stage, Histogram>,
 }
 

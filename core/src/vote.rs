@@ -14,7 +14,7 @@ pub const TRACK_ONLY_QUALITY: f32 = 0.1;
 /// height in the image against [`FULL_VIEW_HEIGHT`], times the share of its keypoints
 /// inside the image (a figure cut by the image border shows less of its pose).
 pub fn view_quality(frame: &DetectionFrame) -> f32 {
-    let Some(h) = &frame.human else { return TRACK_ONLY_QUALITY };
+    let Some(h) = frame.worker() else { return TRACK_ONLY_QUALITY };
     let [w_img, h_img] = frame.image_size;
     let size = (h.bbox.h / (FULL_VIEW_HEIGHT * h_img)).min(1.0);
     let points = h.keypoints.chunks_exact(2);
@@ -78,7 +78,7 @@ mod tests {
     fn a_near_whole_worker_is_seen_best_and_a_vote_from_the_track_least() {
         let mut f = crate::engine::tests::frame("r1", 1, true);
         let h_img = f.image_size[1];
-        let human = f.human.as_mut().unwrap();
+        let human = &mut f.humans[0];
         human.bbox.h = 0.5 * h_img;
         let inside = human.keypoints.clone();
         assert!(
@@ -86,15 +86,15 @@ mod tests {
             "the test frame's pose is in view"
         );
         assert_eq!(view_quality(&f), 1.0);
-        f.human.as_mut().unwrap().bbox.h = 0.125 * h_img;
+        f.humans[0].bbox.h = 0.125 * h_img;
         assert!((view_quality(&f) - 0.5).abs() < 1e-6, "half the full height");
-        let human = f.human.as_mut().unwrap();
+        let human = &mut f.humans[0];
         human.bbox.h = 0.5 * h_img;
         let half = human.keypoints.len() / 4 * 2; // the first half of the points, moved out of the image
         human.keypoints[..half].chunks_mut(2).for_each(|p| p[0] = -10.0);
         let share = (human.keypoints.len() / 2 - half / 2) as f32 / (human.keypoints.len() / 2) as f32;
         assert!((view_quality(&f) - share).abs() < 1e-6, "{} vs {share}", view_quality(&f));
-        f.human = None;
+        f.humans.clear();
         assert_eq!(view_quality(&f), TRACK_ONLY_QUALITY);
     }
 

@@ -14,7 +14,7 @@ use serde::Serialize;
 /// The protocol this build speaks, first in every message. Bumped on every
 /// incompatible change of any payload: a message of another version is refused and
 /// counted (`DecodeError::UnknownVersion`), never misread.
-pub const PROTOCOL_VERSION: u16 = 9;
+pub const PROTOCOL_VERSION: u16 = 10;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -61,7 +61,24 @@ message!(VoteMsg, "vote", robot);
 message!(DecisionMsg, "decision", robot);
 message!(BallotsMsg, "ballots", robot);
 message!(MapMsg, "map", robot);
+message!(HistoryMsg, "history", robot);
 message!(TruthMsg, "truth");
+
+/// A message as JSON, the form recordings hold it in (a viewer such as Foxglove reads
+/// it, with the message's JSON Schema, from `schemars`, on its channel). serde_json writes each `f32` in the fewest
+/// digits that read back to the same value, so [`from_json`] returns exactly the
+/// message (`tests::json_gives_back_every_f32_exactly`).
+pub fn to_json<M: Message>(msg: &M) -> Vec<u8> {
+    serde_json::to_vec(msg).expect("a message serialises to JSON")
+}
+
+/// A message from its JSON, checked as a decoded one is.
+pub fn from_json<M: Message>(bytes: &[u8]) -> Result<M, DecodeError> {
+    let msg: M =
+        serde_json::from_slice(bytes).map_err(|e| DecodeError::Malformed { kind: M::KIND, reason: e.to_string() })?;
+    msg.validate().map_err(|cause| DecodeError::Invalid { kind: M::KIND, cause })?;
+    Ok(msg)
+}
 
 /// Why bytes were refused. Every variant names what was wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -123,6 +140,35 @@ mod tests {
     use super::*;
     use crate::station::Station;
 
+    /// Recordings hold messages as JSON and replay them bit for bit: every f32 must
+    /// come back from serde_json's text as the same bits. Half a million values, spread
+    /// over every exponent and mantissa (a step coprime to 2^32 through the bit space).
+    #[test]
+    fn json_gives_back_every_f32_exactly() {
+        let mut bits = 0u32;
+        for _ in 0..500_000 {
+            bits = bits.wrapping_add(0x9E37_79B9);
+            let x = f32::from_bits(bits);
+            if !x.is_finite() {
+                continue;
+            }
+            let back: f32 = serde_json::from_str(&serde_json::to_string(&x).unwrap()).unwrap();
+            assert_eq!(back.to_bits(), x.to_bits(), "{x:e} came back as {back:e}");
+        }
+    }
+
+    #[test]
+    fn a_message_round_trips_through_json_and_a_bad_one_is_refused_naming_it() {
+        let v = vote();
+        assert_eq!(from_json::<VoteMsg>(&to_json(&v)).unwrap(), v);
+        let bad = String::from_utf8(to_json(&v)).unwrap().replace("\"quality\":0.5", "\"quality\":2.0");
+        let e = from_json::<VoteMsg>(bad.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("quality"), "{e}");
+        let schema = serde_json::to_value(schemars::schema_for!(VoteMsg)).unwrap();
+        assert_eq!(schema["title"], "VoteMsg");
+        assert!(schema["properties"]["worker"].is_object(), "{schema}");
+    }
+
     fn vote() -> VoteMsg {
         VoteMsg {
             robot: RobotId::new("r1").unwrap(),
@@ -144,9 +190,9 @@ mod tests {
             MapMsg { robot: RobotId::new("r1").unwrap(), instance: 7, stations: [Some([1.0, 2.0]), None, None, None] };
         let bytes = encode(&map);
         let expected: Vec<u8> =
-            vec![0x09, 0x02, 0x72, 0x31, 0x07, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00];
+            vec![0x0a, 0x02, 0x72, 0x31, 0x07, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00];
         assert_eq!(bytes, expected);
-        assert_eq!(PROTOCOL_VERSION, 9, "docs/PROTOCOL.md names version 9 and its first byte");
+        assert_eq!(PROTOCOL_VERSION, 10, "docs/PROTOCOL.md names version 10 and its first byte");
         assert_eq!(decode::<MapMsg>(&bytes).unwrap(), map);
     }
 

@@ -72,6 +72,18 @@ macro_rules! id_type {
                 f.write_str(&self.0)
             }
         }
+        impl schemars::JsonSchema for $name {
+            fn schema_name() -> std::borrow::Cow<'static, str> {
+                stringify!($name).into()
+            }
+            fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+                schemars::json_schema!({
+                    "type": "string",
+                    "pattern": "^[A-Za-z0-9_-]{1,64}$",
+                    "description": concat!("A ", $kind, " id"),
+                })
+            }
+        }
     };
 }
 

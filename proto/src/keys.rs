@@ -8,8 +8,10 @@
 //! | `spwi/<fleet>/robot/<robot>/decision`    | [`DecisionMsg`] (for observers) | agent          |
 //! | `spwi/<fleet>/robot/<robot>/ballots`     | [`BallotsMsg`] (relayed votes)  | agent          |
 //! | `spwi/<fleet>/robot/<robot>/map`         | [`MapMsg`] (when a robot joins) | agent          |
+//! | `spwi/<fleet>/robot/<robot>/history`     | [`HistoryMsg`] (when a robot joins) | agent      |
 //! | `spwi/<fleet>/alive/<robot>`             | liveliness token (no payload)   | agent          |
 //! | `spwi/<fleet>/world/truth`               | [`TruthMsg`]                    | simulated world |
+//! | `spwi/<fleet>/roster/<member>`           | the signed roster, `fleet.toml`'s TOML text | any member but an observer |
 //!
 //! [`DetectionFrame`]: crate::DetectionFrame
 //! [`EmbeddingMsg`]: crate::EmbeddingMsg
@@ -17,6 +19,7 @@
 //! [`DecisionMsg`]: crate::DecisionMsg
 //! [`BallotsMsg`]: crate::BallotsMsg
 //! [`MapMsg`]: crate::MapMsg
+//! [`HistoryMsg`]: crate::HistoryMsg
 //! [`TruthMsg`]: crate::TruthMsg
 
 use crate::id::{FleetId, RobotId};
@@ -32,11 +35,12 @@ pub enum Topic {
     Decision,
     Ballots,
     Map,
+    History,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 6] =
-        [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Ballots, Topic::Map];
+    pub const ALL: [Topic; 7] =
+        [Topic::Detections, Topic::Embedding, Topic::Vote, Topic::Decision, Topic::Ballots, Topic::Map, Topic::History];
 
     pub fn as_str(self) -> &'static str {
         match self {
@@ -46,6 +50,7 @@ impl Topic {
             Topic::Decision => "decision",
             Topic::Ballots => "ballots",
             Topic::Map => "map",
+            Topic::History => "history",
         }
     }
 
@@ -110,10 +115,31 @@ pub fn parse_robot_topic(fleet: &FleetId, key: &str) -> Option<(RobotId, Topic)>
     Some((RobotId::new(robot).ok()?, Topic::parse(topic)?))
 }
 
+/// `spwi/<fleet>/roster/<member>`: the signed roster as `member` holds it, said when it
+/// joins, when it adopts a newer one, and to a member heard saying an older one.
+pub fn roster(fleet: &FleetId, member: &RobotId) -> String {
+    format!("{ROOT}/{fleet}/roster/{member}")
+}
+
+/// `spwi/<fleet>/roster/*`
+pub fn all_rosters(fleet: &FleetId) -> String {
+    format!("{ROOT}/{fleet}/roster/*")
+}
+
+/// Parses `spwi/<fleet>/roster/<member>`.
+pub fn parse_roster(fleet: &FleetId, key: &str) -> Option<RobotId> {
+    parse_member_key(fleet, "roster", key)
+}
+
 /// Parses `spwi/<fleet>/alive/<robot>`.
 pub fn parse_alive(fleet: &FleetId, key: &str) -> Option<RobotId> {
-    let rest = key.strip_prefix(ROOT)?.strip_prefix('/')?.strip_prefix(fleet.as_str())?.strip_prefix("/alive/")?;
-    RobotId::new(rest).ok()
+    parse_member_key(fleet, "alive", key)
+}
+
+/// The member named by `spwi/<fleet>/<tree>/<member>`.
+fn parse_member_key(fleet: &FleetId, tree: &str, key: &str) -> Option<RobotId> {
+    let rest = key.strip_prefix(ROOT)?.strip_prefix('/')?.strip_prefix(fleet.as_str())?.strip_prefix('/')?;
+    RobotId::new(rest.strip_prefix(tree)?.strip_prefix('/')?).ok()
 }
 
 #[cfg(test)]
@@ -133,6 +159,15 @@ mod tests {
         }
         assert_eq!(robot_topic(&f, &r, Topic::Vote), "spwi/f1/robot/r-2/vote");
         assert_eq!(all_robots(&f, Topic::Embedding), "spwi/f1/robot/*/embedding");
+    }
+
+    #[test]
+    fn roster_keys_round_trip() {
+        let (f, r) = ids();
+        assert_eq!(roster(&f, &r), "spwi/f1/roster/r-2");
+        assert_eq!(parse_roster(&f, &roster(&f, &r)), Some(r.clone()));
+        assert_eq!(parse_roster(&FleetId::new("f2").unwrap(), &roster(&f, &r)), None);
+        assert_eq!(parse_roster(&f, "spwi/f1/roster/bad name"), None);
     }
 
     #[test]

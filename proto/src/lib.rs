@@ -22,7 +22,9 @@ pub mod keys;
 pub mod messages;
 pub mod station;
 
-pub use codec::{decode, decode_from, encode, DecodeError, Message, MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
+pub use codec::{
+    decode, decode_from, encode, from_json, to_json, DecodeError, Message, MAX_MESSAGE_BYTES, PROTOCOL_VERSION,
+};
 pub use id::{FleetId, IdError, RobotId};
 pub use messages::*;
 pub use station::{Station, UnknownStation, NUM_CLASSES};

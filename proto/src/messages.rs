@@ -71,7 +71,7 @@ fn dim(field: &'static str, xs: &[f32], want: usize) -> Result<(), Invalid> {
 }
 
 /// An axis-aligned box in image pixels: top-left corner, width, height.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct BBox {
     pub x: f32,
     pub y: f32,
@@ -94,7 +94,7 @@ impl BBox {
 
 /// What kind of object a detection is (paper Table I), plus anything else a detector
 /// may report. The station an object marks is [`ObjectClass::station`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 pub enum ObjectClass {
     Crate,
     Box,
@@ -139,18 +139,24 @@ impl ObjectClass {
     }
 }
 
-/// The worker as one robot's detector sees it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// A person as one robot's detector sees it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct HumanDetection {
     pub bbox: BBox,
     /// 17 COCO keypoints as x0, y0, x1, y1, … in image pixels ([`KEYPOINT_VALUES`]).
     pub keypoints: Vec<f32>,
     /// Appearance feature ([`FEATURE_DIM`]).
     pub feature: Vec<f32>,
+    /// The detector's id of this person across its frames, if it tracks people (ids
+    /// are the detector's own: they mean nothing to another robot).
+    pub track: Option<u32>,
 }
 
+/// Most people one frame may carry.
+pub const MAX_HUMANS: usize = 8;
+
 /// One detected object.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ObjectDetection {
     pub class: ObjectClass,
     pub bbox: BBox,
@@ -163,7 +169,7 @@ pub struct ObjectDetection {
 /// Where a robot's camera stands on the floor and where it points, in the floor frame
 /// (metres; radians counter-clockwise from the floor's x axis). A real robot's
 /// localiser provides it; the simulated world fills it in.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FloorPose {
     pub position: [f32; 2],
     pub heading: f32,
@@ -171,7 +177,7 @@ pub struct FloorPose {
 
 /// One camera frame's worth of detections of one robot. Its tick is the period of the
 /// fleet's clock it was captured in ([`DetectionFrame::tick`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DetectionFrame {
     pub robot: RobotId,
     /// When the camera took the frame: microseconds since the Unix epoch on the robot's
@@ -182,7 +188,10 @@ pub struct DetectionFrame {
     pub pose: Option<FloorPose>,
     /// Image size in pixels (width, height): bbox distances are normalised by its diagonal.
     pub image_size: [f32; 2],
-    pub human: Option<HumanDetection>,
+    /// Every person in view (at most [`MAX_HUMANS`]), in any order. The robot follows
+    /// one of them, the worker its team tracks (`spwi-core`'s engine puts that one
+    /// first before anything reads the frame).
+    pub humans: Vec<HumanDetection>,
     pub objects: Vec<ObjectDetection>,
     /// Global appearance of the whole view ([`FEATURE_DIM`]).
     pub scene_feature: Vec<f32>,
@@ -199,9 +208,14 @@ impl DetectionFrame {
         t.saturating_mul(TICK_US)
     }
 
+    /// The person the robot follows: the first (see [`DetectionFrame::humans`]).
+    pub fn worker(&self) -> Option<&HumanDetection> {
+        self.humans.first()
+    }
+
     /// Visibility count N_detected: the worker (if seen) plus every object detected.
     pub fn visibility(&self) -> u32 {
-        self.objects.len() as u32 + u32::from(self.human.is_some())
+        self.objects.len() as u32 + u32::from(!self.humans.is_empty())
     }
 }
 
@@ -215,10 +229,16 @@ impl Validate for DetectionFrame {
         if let Some(p) = &self.pose {
             finite("pose", &[p.position[0], p.position[1], p.heading])?;
         }
-        if let Some(h) = &self.human {
-            h.bbox.validate("human.bbox")?;
-            dim("human.keypoints", &h.keypoints, KEYPOINT_VALUES)?;
-            dim("human.feature", &h.feature, FEATURE_DIM)?;
+        if self.humans.len() > MAX_HUMANS {
+            return Err(invalid("humans", format!("{} people, at most {MAX_HUMANS}", self.humans.len())));
+        }
+        for (i, h) in self.humans.iter().enumerate() {
+            h.bbox.validate("humans.bbox")?;
+            dim("humans.keypoints", &h.keypoints, KEYPOINT_VALUES)?;
+            dim("humans.feature", &h.feature, FEATURE_DIM)?;
+            if h.track.is_some() && self.humans[..i].iter().any(|o| o.track == h.track) {
+                return Err(invalid("humans.track", format!("track {} twice", h.track.unwrap_or_default())));
+            }
         }
         if self.objects.len() > MAX_OBJECTS {
             return Err(invalid("objects", format!("{} objects, at most {MAX_OBJECTS}", self.objects.len())));
@@ -237,7 +257,7 @@ impl Validate for DetectionFrame {
 /// A robot's estimate of the worker on the floor: a constant-velocity track.
 /// The covariance is per axis (the same for x and y): position variance (m²),
 /// position–velocity covariance (m²/s), velocity variance (m²/s²).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct WorkerEstimate {
     pub position: [f32; 2],
     pub velocity: [f32; 2],
@@ -261,7 +281,7 @@ impl WorkerEstimate {
 }
 
 /// An object that marks a station, seen this tick, back-projected onto the floor.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Landmark {
     pub station: Station,
     pub position: [f32; 2],
@@ -274,7 +294,7 @@ pub struct Landmark {
 /// with cameras that turn to the worker, a station may not be seen for minutes.
 /// Each position is a station's work spot as the worker was seen using it, or the
 /// centre of the objects that mark it, in the floor frame.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct MapMsg {
     pub robot: RobotId,
     pub instance: u64,
@@ -307,7 +327,7 @@ impl Validate for MapMsg {
 /// facing of the worker's body and one map of the stations. `verdict` is the robot's
 /// latest decision not shared before, in brief: peers measure how often the team
 /// agrees from it, so that no robot need hear every other robot's decision messages.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct EmbeddingMsg {
     pub robot: RobotId,
     /// Random per process start: two daemons that share a robot id differ here.
@@ -365,7 +385,7 @@ impl Validate for EmbeddingMsg {
 /// What a robot decided for one tick, enough to compare two robots' decisions: the
 /// class at t (`None`: no member saw the worker), whose ballots were counted, and
 /// their digest ([`DecisionMsg::digest`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Verdict {
     pub tick: u64,
     pub class: Option<Station>,
@@ -391,14 +411,14 @@ fn sorted_voters(field: &'static str, voters: &[RobotId]) -> Result<(), Invalid>
 }
 
 /// The predicted class and its calibrated confidence for one step.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct StepVote {
     pub class: Station,
     pub confidence: f32,
 }
 
 /// A robot's vote for one tick: `steps[0]` is the prediction for t, `steps[h]` for t+h.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct VoteMsg {
     pub robot: RobotId,
     pub instance: u64,
@@ -457,7 +477,7 @@ impl Validate for VoteMsg {
 }
 
 /// How a decision came about.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 pub enum DecidedBy {
     /// Every live member had voted (or said it does not see the worker).
     AllVoted,
@@ -466,7 +486,7 @@ pub enum DecidedBy {
 }
 
 /// The team's decision for one step: the winning class and its weighted score.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TeamStep {
     pub class: Station,
     pub score: f32,
@@ -474,7 +494,7 @@ pub struct TeamStep {
 
 /// A robot's view of the team decision for one tick. `steps` is empty when no member
 /// saw the worker; otherwise `steps[0]` is for t and `steps[h]` for t+h.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DecisionMsg {
     pub robot: RobotId,
     pub instance: u64,
@@ -505,7 +525,7 @@ impl Validate for DecisionMsg {
 /// The ballots a robot holds for one tick, its own and those it heard from peers,
 /// published partway through the tick so that a peer that lost one of them on its own
 /// link still counts it. Each vote keeps its origin; `robot` is the relaying robot.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct BallotsMsg {
     pub robot: RobotId,
     pub instance: u64,
@@ -535,8 +555,65 @@ impl Validate for BallotsMsg {
     }
 }
 
+/// Most ticks one history may carry: ten seconds, about what trust averages over.
+pub const MAX_HISTORY_TICKS: usize = 100;
+
+/// Every vote a robot held for one tick it learned from (the votes of its lesson).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct Lesson {
+    pub tick: u64,
+    /// Sorted by voter, each voter once.
+    pub votes: Vec<VoteMsg>,
+}
+
+/// The lessons a robot learned lately, sent when a member joins: the newcomer learns
+/// from these signed votes whom the team has seen agree, as its peers did, instead of
+/// starting out trusting nobody more than anybody. A history never speaks for its
+/// sender: the receiver takes from it only the votes of others.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct HistoryMsg {
+    pub robot: RobotId,
+    pub instance: u64,
+    /// Oldest first, each tick once.
+    pub lessons: Vec<Lesson>,
+}
+
+impl Validate for HistoryMsg {
+    fn validate(&self) -> Result<(), Invalid> {
+        if self.lessons.len() > MAX_HISTORY_TICKS {
+            let n = self.lessons.len();
+            return Err(invalid("lessons", format!("{n} lessons, at most {MAX_HISTORY_TICKS}")));
+        }
+        if let Some(w) = self.lessons.windows(2).find(|w| w[0].tick >= w[1].tick) {
+            return Err(invalid(
+                "lessons.tick",
+                format!("{} before {}: oldest first, each once", w[0].tick, w[1].tick),
+            ));
+        }
+        for l in &self.lessons {
+            if l.votes.len() > MAX_MEMBERS {
+                return Err(invalid("lessons.votes", format!("{} votes, at most {MAX_MEMBERS}", l.votes.len())));
+            }
+            if let Some(w) = l.votes.windows(2).find(|w| w[0].robot >= w[1].robot) {
+                let (a, b) = (&w[0].robot, &w[1].robot);
+                return Err(invalid("lessons.votes.robot", format!("{a} before {b}: sorted, each once")));
+            }
+            for v in &l.votes {
+                v.validate()?;
+                if v.tick != l.tick {
+                    return Err(invalid(
+                        "lessons.votes.tick",
+                        format!("a vote for tick {} in the lesson of tick {}", v.tick, l.tick),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// What the worker is doing, as the simulated world knows it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 pub enum WorkerPhase {
     /// Walking to a goal.
     Moving,
@@ -547,7 +624,7 @@ pub enum WorkerPhase {
 }
 
 /// A robot's pose on the floor (metres, radians), for views and scoring.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct RobotPose {
     pub robot: RobotId,
     pub position: [f32; 2],
@@ -555,7 +632,7 @@ pub struct RobotPose {
 }
 
 /// Ground truth for one tick (simulation only; agents never read it).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TruthMsg {
     pub tick: u64,
     /// The station the worker is heading to or working at.

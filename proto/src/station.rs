@@ -47,6 +47,21 @@ impl Station {
     }
 }
 
+/// In JSON, as on the wire, a station is its index.
+impl schemars::JsonSchema for Station {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "Station".into()
+    }
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "type": "integer",
+            "minimum": 0,
+            "maximum": NUM_CLASSES - 1,
+            "description": "0 storage area, 1 workstation, 2 assembly station, 3 manufacturing station",
+        })
+    }
+}
+
 impl std::fmt::Display for Station {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.pad(self.name())

@@ -56,11 +56,12 @@ fn examples() -> Vec<(&'static str, Vec<u8>, serde_json::Value)> {
         capture_us: 1_765_000_000_000_000,
         pose: Some(FloorPose { position: [2.0, 4.5], heading: 1.5 }),
         image_size: [640.0, 480.0],
-        human: Some(HumanDetection {
+        humans: vec![HumanDetection {
             bbox: BBox { x: 300.0, y: 200.0, w: 40.0, h: 120.0 },
             keypoints: values(KEYPOINT_VALUES, 300.0),
             feature: values(FEATURE_DIM, 0.0),
-        }),
+            track: Some(7),
+        }],
         objects: vec![ObjectDetection {
             class: ObjectClass::Workbench,
             bbox: BBox { x: 100.0, y: 250.0, w: 80.0, h: 60.0 },
@@ -87,6 +88,17 @@ fn examples() -> Vec<(&'static str, Vec<u8>, serde_json::Value)> {
         tick: 17_650_000_000,
         votes: vec![vote(), VoteMsg { robot: id("r2"), instance: 301, signature: vec![7; 64], ..vote() }],
     };
+    let history = HistoryMsg {
+        robot: id("r2"),
+        instance: 301,
+        lessons: vec![
+            Lesson {
+                tick: 17_649_999_990,
+                votes: vec![VoteMsg { tick: 17_649_999_990, signature: vec![9; 64], ..vote() }],
+            },
+            Lesson { tick: 17_650_000_000, votes: vec![vote()] },
+        ],
+    };
     let map = MapMsg { robot: id("r1"), instance: 7, stations: [Some([1.0, 2.0]), None, None, Some([-3.5, 8.25])] };
     let truth = TruthMsg {
         tick: 17_650_000_000,
@@ -105,6 +117,7 @@ fn examples() -> Vec<(&'static str, Vec<u8>, serde_json::Value)> {
         ("decision", both(&d)),
         ("ballots", both(&ballots)),
         ("map", both(&map)),
+        ("history", both(&history)),
         ("truth", both(&truth)),
     ]
     .into_iter()
@@ -152,5 +165,6 @@ fn every_golden_vector_decodes_to_its_json() {
     check::<DecisionMsg>(&dir, "decision", &r1);
     check::<BallotsMsg>(&dir, "ballots", &r2);
     check::<MapMsg>(&dir, "map", &r1);
+    check::<HistoryMsg>(&dir, "history", &r2);
     check::<TruthMsg>(&dir, "truth", &r1);
 }

@@ -18,8 +18,7 @@ fn bbox() -> impl Strategy<Value = BBox> {
 
 fn frame() -> impl Strategy<Value = DetectionFrame> {
     let human =
-        (bbox(), prop::collection::vec(finite(), KEYPOINT_VALUES), prop::collection::vec(finite(), FEATURE_DIM))
-            .prop_map(|(bbox, keypoints, feature)| HumanDetection { bbox, keypoints, feature });
+        (bbox(), prop::collection::vec(finite(), KEYPOINT_VALUES), prop::collection::vec(finite(), FEATURE_DIM));
     let object = (
         prop::sample::select(ObjectClass::ALL.to_vec()),
         bbox(),
@@ -31,17 +30,27 @@ fn frame() -> impl Strategy<Value = DetectionFrame> {
         robot(),
         any::<u64>(),
         (1.0f32..4000.0, 1.0f32..4000.0),
-        prop::option::of(human),
+        prop::collection::vec(human, 0..3),
         prop::collection::vec(object, 0..6),
         prop::collection::vec(finite(), FEATURE_DIM),
         prop::option::of((finite(), finite(), finite())),
     )
-        .prop_map(|(robot, capture_us, (w, h), human, objects, scene_feature, pose)| DetectionFrame {
+        .prop_map(|(robot, capture_us, (w, h), humans, objects, scene_feature, pose)| DetectionFrame {
             robot,
             capture_us,
             pose: pose.map(|(x, y, heading)| FloorPose { position: [x, y], heading }),
             image_size: [w, h],
-            human,
+            // Track ids, when a detector gives them, are distinct within a frame.
+            humans: humans
+                .into_iter()
+                .enumerate()
+                .map(|(i, (bbox, keypoints, feature))| HumanDetection {
+                    bbox,
+                    keypoints,
+                    feature,
+                    track: (i % 2 == 1).then_some(i as u32),
+                })
+                .collect(),
             objects,
             scene_feature,
         })

@@ -61,6 +61,8 @@ pub const HEARD_LOSS: f64 = 0.1;
 
 pub struct DatasetOptions {
     pub scenario: Scenario,
+    /// Workers on the floor: the first is labelled, the others walk and hide it.
+    pub workers: usize,
     pub episodes: u32,
     pub robots: usize,
     pub ticks: u32,
@@ -224,7 +226,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         let conditions = o.mix.draw(seed, floor.camera.policy);
         floor.camera.policy = conditions.camera;
         episode_conditions.push(conditions);
-        let mut world = World::new(floor.clone(), o.scenario, seed, o.robots);
+        let mut world = World::with_workers(floor.clone(), o.scenario, seed, o.robots, o.workers);
         let camera = crate::calibration::of(&floor.camera);
         let mut team_floor = match conditions.warm_up_ticks {
             0 => TeamFloor::new(camera.clone(), o.robots),
@@ -241,13 +243,15 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
         let mut rows: Vec<Vec<Pending>> = Vec::with_capacity(o.ticks as usize);
         for t in 0..total as u32 {
             world.step();
-            intents.push(u8::from(world.worker.goal));
-            phases.push(phase_id(world.worker.phase));
+            intents.push(u8::from(world.worker().goal));
+            phases.push(phase_id(world.worker().phase));
             if t >= o.ticks {
                 continue; // only the truth of these ticks is needed
             }
-            let frames: Vec<DetectionFrame> =
+            let mut frames: Vec<DetectionFrame> =
                 ids.iter().enumerate().map(|(slot, id)| world.observe(slot, id)).collect();
+            // Of several people in view, each robot's row is of the one it follows.
+            team_floor.follow(&mut frames);
             // What each robot's engine computes from its frame and, at its vote step,
             // every other robot of the episode being a peer whose estimate and
             // landmarks arrived.
@@ -255,13 +259,12 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
             let mut tick_rows = Vec::with_capacity(o.robots);
             for (slot, frame) in frames.iter().enumerate() {
                 let keypoints = frame
-                    .human
-                    .as_ref()
+                    .worker()
                     .map(|h| normalise_keypoints(&h.keypoints, frame.image_size))
                     .unwrap_or_else(|| vec![0.0; KEYPOINT_VALUES]);
                 let mut row = Pending {
                     keypoints,
-                    seen: frame.human.is_some(),
+                    seen: frame.worker().is_some(),
                     visibility: frame.visibility(),
                     embedding: vec![0.0; EMBEDDING_DIM],
                     logits: [0.0; NUM_CLASSES],
@@ -280,7 +283,7 @@ pub fn export(o: &DatasetOptions) -> Result<(u64, u64)> {
                         sp.adj.push(&g.adj)?;
                         let mask: Vec<u8> = (0..n).map(|i| u8::from(i < g.nodes)).collect();
                         sp.mask.push(&mask)?;
-                        sp.label.push(&[world.worker.goal.into()])?;
+                        sp.label.push(&[world.worker().goal.into()])?;
                         sp.episode.push(&[e])?;
                         sp.split.push(&[split(e, o.episodes)])?;
                         sp.robot.push(&[slot as u8])?;
@@ -547,6 +550,7 @@ pub fn main(a: DatasetArgs) -> Result<()> {
     let started = std::time::Instant::now();
     let (samples, rows) = crate::dataset::export(&crate::dataset::DatasetOptions {
         scenario: world.scenario,
+        workers: usize::from(world.workers),
         episodes,
         robots,
         ticks,
@@ -600,6 +604,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(dir);
         export(&DatasetOptions {
             scenario: Scenario::Dynamic,
+            workers: 1,
             episodes: 5,
             robots: 2,
             ticks: 40,

@@ -28,6 +28,8 @@ use tokio::sync::watch;
 pub struct DemoOptions {
     pub robots: usize,
     pub scenario: Scenario,
+    /// Workers on the floor (the truth describes the first).
+    pub workers: usize,
     pub seed: u64,
     pub duration: Duration,
     pub kill_after: Option<Duration>,
@@ -360,10 +362,12 @@ pub async fn run(mut opts: DemoOptions, models: Arc<ModelSet>, mut stop: watch::
     let world = tokio::spawn(service::run(
         WorldOptions {
             fleet: fleet.clone(),
+            workers: opts.workers,
             scenario: opts.scenario,
             seed: opts.seed,
             layout: opts.layout.clone(),
             zenoh: hub.peer_config()?,
+            credentials: None,
             stuck_slot: None,
         },
         world_rx,
@@ -487,6 +491,7 @@ pub fn main(a: DemoArgs) -> Result<()> {
     let opts = crate::demo::DemoOptions {
         robots: robots as usize,
         scenario: world.scenario,
+        workers: usize::from(world.workers),
         seed,
         duration,
         kill_after,

@@ -24,7 +24,7 @@ impl StuckCamera {
         match &self.frozen {
             Some(f) => DetectionFrame { capture_us: frame.capture_us, ..f.clone() },
             None => {
-                if frame.human.is_some() {
+                if frame.worker().is_some() {
                     self.frozen = Some(frame.clone());
                 }
                 frame
@@ -43,7 +43,7 @@ impl LoopingCamera {
     /// What the looping camera delivers instead of `frame`.
     pub fn pass(&mut self, frame: DetectionFrame) -> DetectionFrame {
         if self.clip.len() < LOOP_TICKS {
-            if !self.clip.is_empty() || frame.human.is_some() {
+            if !self.clip.is_empty() || frame.worker().is_some() {
                 self.clip.push(frame.clone());
             }
             return frame;
@@ -73,7 +73,7 @@ mod tests {
             let out = cam.pass(live.clone());
             assert_eq!(out.capture_us, live.capture_us);
             match &first_seen {
-                None if live.human.is_some() => first_seen = Some(live),
+                None if live.worker().is_some() => first_seen = Some(live),
                 None => assert_eq!(out, live, "nothing to freeze on yet"),
                 Some(f) => assert_eq!(DetectionFrame { capture_us: f.capture_us, ..out }, *f),
             }
@@ -94,7 +94,7 @@ mod tests {
             let out = cam.pass(live.clone());
             assert_eq!(out.capture_us, live.capture_us);
             if clip.len() < LOOP_TICKS {
-                if !clip.is_empty() || live.human.is_some() {
+                if !clip.is_empty() || live.worker().is_some() {
                     clip.push(live.clone());
                 }
                 assert_eq!(out, live, "recording: passes the live frame");
@@ -109,6 +109,6 @@ mod tests {
                 clip[i % LOOP_TICKS]
             );
         }
-        assert!(played.windows(2).any(|w| w[0].human != w[1].human), "the clip moves");
+        assert!(played.windows(2).any(|w| w[0].humans != w[1].humans), "the clip moves");
     }
 }

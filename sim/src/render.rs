@@ -128,10 +128,12 @@ pub fn render(world: &World, frames: &[(usize, DetectionFrame)], out: &Path) -> 
         let nose = to([p.position[0] + 0.6 * p.heading.cos(), p.position[1] + 0.6 * p.heading.sin()]);
         c.line(q, nose, DARK);
     }
-    let wk = to(world.worker.position);
-    let goal = to(l.station(world.worker.goal).work_spot);
-    c.line(wk, goal, STATION[world.worker.goal.index()]);
-    c.disc(wk.0, wk.1, 0.3 * k, WORKER);
+    // every worker, a line to where it goes
+    for worker in &world.workers {
+        let (wk, spot) = (to(worker.position), to(worker.spot()));
+        c.line(wk, spot, STATION[worker.goal.index()]);
+        c.disc(wk.0, wk.1, 0.3 * k, WORKER);
+    }
 
     // camera views, scaled to VIEW_W wide
     for (i, (_, f)) in frames.iter().enumerate() {
@@ -145,7 +147,7 @@ pub fn render(world: &World, frames: &[(usize, DetectionFrame)], out: &Path) -> 
             let b = o.bbox;
             c.frame(ox + b.x * s, oy + b.y * s, ox + (b.x + b.w) * s, oy + (b.y + b.h) * s, station_colour(o.class));
         }
-        if let Some(h) = &f.human {
+        for h in &f.humans {
             let b = h.bbox;
             c.frame(ox + b.x * s, oy + b.y * s, ox + (b.x + b.w) * s, oy + (b.y + b.h) * s, WORKER);
             for kp in h.keypoints.chunks_exact(2) {
@@ -187,7 +189,7 @@ pub fn main(a: RenderArgs) -> Result<()> {
     let RenderArgs { world: w, seed, tick, robots, out } = a;
     let floor = w.floor()?;
     check_robots(robots, std::slice::from_ref(&floor))?;
-    let world = spwi_world::world::World::new(floor.layout, w.scenario, seed, robots);
+    let world = spwi_world::world::World::with_workers(floor.layout, w.scenario, seed, robots, usize::from(w.workers));
     crate::render::render_tick(world, robots, tick, &out)?;
     println!("wrote {}", out.display());
     Ok(())

@@ -6,6 +6,9 @@
 //! and the ground truth for scoring. `--stuck-slot S` freezes the camera
 //! of whichever robot holds slot S on its first frame showing the worker (a fault for
 //! end-to-end tests; robot ids in a container fleet are not known in advance, slots are).
+//! In a secured fleet it takes a newer signed roster while it runs, as every member
+//! does (`spwi_agent::fleet::live`): a revoked robot gets no more frames, and the
+//! session reopens with the roster's access rules (the frames of that moment are lost).
 
 use crate::faulty_camera::StuckCamera;
 use crate::world_args::WorldArgs;
@@ -26,9 +29,13 @@ use zenoh::sample::SampleKind;
 pub struct WorldOptions {
     pub fleet: FleetId,
     pub scenario: Scenario,
+    /// Workers on the floor (the truth describes the first).
+    pub workers: usize,
     pub seed: u64,
     pub layout: Layout,
     pub zenoh: zenoh::Config,
+    /// The fleet's credentials when it is secured: newer rosters are taken while running.
+    pub credentials: Option<std::sync::Arc<spwi_agent::fleet::Credentials>>,
     /// The layout slot whose camera is stuck, if any.
     pub stuck_slot: Option<usize>,
 }
@@ -67,11 +74,15 @@ impl Slots {
     }
 }
 
-pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Result<()> {
-    let session = zenoh::open(opts.zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
-    let (tx, mut rx) = mpsc::unbounded_channel();
-    let fleet = opts.fleet.clone();
-    let _membership = session
+/// The world's session and the membership its liveliness subscriber reports.
+async fn open(
+    zenoh: zenoh::Config,
+    fleet: &FleetId,
+) -> Result<(zenoh::Session, zenoh::pubsub::Subscriber<()>, mpsc::UnboundedReceiver<(RobotId, bool)>)> {
+    let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
+    let (tx, rx) = mpsc::unbounded_channel();
+    let fleet = fleet.clone();
+    let membership = session
         .liveliness()
         .declare_subscriber(keys::all_alive(&fleet))
         .history(true)
@@ -82,7 +93,18 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
         })
         .await
         .map_err(|e| anyhow!(e))?;
-    let mut world = World::new(opts.layout, opts.scenario, opts.seed, 0);
+    Ok((session, membership, rx))
+}
+
+pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Result<()> {
+    let mut zenoh = opts.zenoh.clone();
+    let (mut session, mut membership, mut rx) = open(zenoh.clone(), &opts.fleet).await?;
+    let mut roster = opts.credentials.clone().map(spwi_agent::fleet::live::Watch::new);
+    if let Some(w) = roster.as_mut() {
+        w.listen(&session).await?;
+    }
+    let mut reopen_at: Option<tokio::time::Instant> = None;
+    let mut world = World::with_workers(opts.layout, opts.scenario, opts.seed, 0, opts.workers);
     let mut slots = Slots::new(world.robots.len());
     let mut stuck = StuckCamera::default();
     let truth_key = keys::truth(&opts.fleet);
@@ -96,7 +118,33 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
     loop {
         tokio::select! {
             _ = shutdown.changed() => break,
+            adopted = spwi_agent::fleet::live::adopted(roster.as_mut(), &session) => {
+                let adopted = adopted?;
+                for robot in &adopted.revoked {
+                    if let Some(s) = slots.leave(robot) {
+                        world.set_in_fleet(s, false);
+                        tracing::info!(%robot, slot = s, "robot revoked");
+                    }
+                }
+                spwi_agent::fleet::secure::apply(&mut zenoh, &adopted.credentials)?;
+                let delay = spwi_agent::fleet::live::reopen_delay(&adopted.credentials.identity.name);
+                reopen_at = Some(tokio::time::Instant::now() + delay);
+            }
+            _ = async { tokio::time::sleep_until(reopen_at.expect("guarded")).await }, if reopen_at.is_some() => {
+                reopen_at = None;
+                drop(membership);
+                let _ = session.close().await;
+                (session, membership, rx) = open(zenoh.clone(), &opts.fleet).await?;
+                if let Some(w) = roster.as_mut() {
+                    w.listen(&session).await?;
+                }
+                tracing::info!("reopened the session with the new roster's access rules");
+            }
             Some((robot, alive)) = rx.recv() => {
+                let admitted = roster.as_ref().is_none_or(|w| w.credentials().admits_robot(&robot));
+                if alive && !admitted {
+                    continue; // revoked, until the reopened session's rules cut it off
+                }
                 if alive {
                     match slots.join(robot.clone()) {
                         Some(s) => { world.set_in_fleet(s, true); tracing::info!(%robot, slot = s, "robot joined"); }
@@ -125,6 +173,7 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
             }
         }
     }
+    drop(membership);
     let _ = session.close().await;
     Ok(())
 }
@@ -172,8 +221,17 @@ pub fn main(a: WorldServiceArgs) -> Result<()> {
         }
         tracing::warn!(slot = s, "the camera of the robot in slot {s} will freeze on its first sight of the worker");
     }
-    let opts =
-        crate::service::WorldOptions { fleet, scenario: world.scenario, seed, layout: floor.layout, zenoh, stuck_slot };
+    let workers = usize::from(world.workers);
+    let opts = crate::service::WorldOptions {
+        fleet,
+        scenario: world.scenario,
+        workers,
+        seed,
+        layout: floor.layout,
+        zenoh,
+        credentials,
+        stuck_slot,
+    };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     rt.block_on(async {
         let (tx, rx) = tokio::sync::watch::channel(false);

@@ -36,6 +36,7 @@ pub struct Difficulty {
 pub fn measure(
     floors: &[NamedLayout],
     scenario: Scenario,
+    workers: usize,
     robots: usize,
     episodes: u32,
     ticks: u32,
@@ -53,13 +54,13 @@ pub fn measure(
             .iter()
             .map(|&(a, b)| (layout.station(a).work_spot, layout.station(b).work_spot))
             .collect();
-        let mut w = World::new(layout.clone(), scenario, seed.wrapping_add(e as u64), robots);
+        let mut w = World::with_workers(layout.clone(), scenario, seed.wrapping_add(e as u64), robots, workers);
         for _ in 0..ticks {
             w.step();
             let mut any = false;
             for (slot, id) in ids.iter().enumerate() {
                 let f = w.observe(slot, id);
-                if f.human.is_some() {
+                if f.worker().is_some() {
                     seen[slot] += 1;
                     any = true;
                 }
@@ -67,16 +68,16 @@ pub fn measure(
                 frames += 1;
             }
             nobody += u64::from(!any);
-            match w.worker.phase {
+            match w.worker().phase {
                 WorkerPhase::Moving => moving += 1,
                 WorkerPhase::Transition => transition += 1,
                 WorkerPhase::Stationary => stationary += 1,
             }
-            let p = w.worker.position;
+            let p = w.worker().position;
             near += u64::from(pairs.iter().any(|&(a, b)| dist(p, a) < 3.0 && dist(p, b) < 3.0));
         }
-        changes += w.worker.goal_changes as u64;
-        trips += w.worker.arrivals as u64 + 1;
+        changes += w.worker().goal_changes as u64;
+        trips += w.worker().arrivals as u64 + 1;
     }
     let n = (episodes as u64 * ticks as u64).max(1) as f64;
     Difficulty {
@@ -104,7 +105,14 @@ pub struct Coverage {
 
 /// Coverage for fleets of 1-8 robots under `fixed` and `track` cameras (episode e on
 /// floor e mod floors; the same worker walks whatever the fleet).
-pub fn coverage(floors: &[NamedLayout], scenario: Scenario, episodes: u32, ticks: u32, seed: u64) -> Vec<Coverage> {
+pub fn coverage(
+    floors: &[NamedLayout],
+    scenario: Scenario,
+    workers: usize,
+    episodes: u32,
+    ticks: u32,
+    seed: u64,
+) -> Vec<Coverage> {
     let ids: Vec<spwi_proto::RobotId> =
         (0..8).map(|i| spwi_proto::RobotId::new(format!("r{i}")).expect("valid id")).collect();
     [CameraPolicy::Fixed, CameraPolicy::Track]
@@ -117,12 +125,12 @@ pub fn coverage(floors: &[NamedLayout], scenario: Scenario, episodes: u32, ticks
                         let mut layout = floors[e as usize % floors.len()].layout.clone();
                         layout.camera.policy = camera;
                         let n = n.min(layout.robots.len());
-                        let mut w = World::new(layout, scenario, seed.wrapping_add(e as u64), n);
+                        let mut w = World::with_workers(layout, scenario, seed.wrapping_add(e as u64), n, workers);
                         for _ in 0..ticks {
                             w.step();
                             let mut any = false;
                             for (slot, id) in ids.iter().enumerate().take(n) {
-                                any |= w.observe(slot, id).human.is_some();
+                                any |= w.observe(slot, id).worker().is_some();
                             }
                             seen += u64::from(any);
                         }
@@ -172,7 +180,7 @@ pub fn main(a: StatsArgs) -> Result<()> {
     let StatsArgs { world, robots, episodes, ticks, seed, json, coverage } = a;
     let floors = world.floors()?;
     if coverage {
-        let c = crate::stats::coverage(&floors, world.scenario, episodes, ticks, seed);
+        let c = crate::stats::coverage(&floors, world.scenario, usize::from(world.workers), episodes, ticks, seed);
         if json {
             println!("{}", serde_json::to_string_pretty(&c)?);
         } else {
@@ -181,7 +189,7 @@ pub fn main(a: StatsArgs) -> Result<()> {
         return Ok(());
     }
     check_robots(robots, &floors)?;
-    let d = crate::stats::measure(&floors, world.scenario, robots, episodes, ticks, seed);
+    let d = crate::stats::measure(&floors, world.scenario, usize::from(world.workers), robots, episodes, ticks, seed);
     if json {
         println!("{}", serde_json::to_string_pretty(&d)?);
     } else {

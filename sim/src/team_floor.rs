@@ -52,6 +52,14 @@ impl TeamFloor {
         TeamFloor { views: vec![FloorView::new(camera); robots], shared: vec![None; robots] }
     }
 
+    /// Puts first in each robot's frame (by slot) the person its engine would follow
+    /// ([`FloorView::follow`]): call before [`TeamFloor::observe`] with the same frames.
+    pub fn follow(&self, frames: &mut [DetectionFrame]) {
+        for (view, frame) in self.views.iter().zip(frames) {
+            view.follow(frame);
+        }
+    }
+
     /// One tick in which every robot hears every other: every robot's frame (by slot) in.
     pub fn observe(&mut self, frames: &[DetectionFrame]) -> Vec<Heard> {
         self.observe_heard(frames, |_, _| true)
@@ -88,7 +96,7 @@ impl TeamFloor {
             let (robots, sightings) = floor::sightings(&held);
             let team = floor::team_worker(&sightings, |_| true);
             let peers = team.kept_peers(&sightings, |i| robots[i] == slot).into_iter().copied().collect();
-            view.observe_worker(own.as_ref(), team.track.as_ref());
+            view.observe_worker(tick, own.as_ref(), team.track.as_ref());
             heard.push(Heard { own, team: team.track, peers, facing: team.facing });
         }
         self.shared = now.into_iter().map(Some).collect();

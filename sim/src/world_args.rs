@@ -20,6 +20,11 @@ pub struct WorldArgs {
     /// Where the cameras point (default: each layout's own `camera.policy`).
     #[arg(long, value_parser = parse_camera)]
     pub camera: Option<CameraPolicy>,
+    /// Workers on the floor, each with its own work cycle: they step round and hide
+    /// one another; frames carry everyone in view. The truth and the scores describe
+    /// the first.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=spwi_world::world::MAX_WORKERS as i64))]
+    pub workers: u8,
 }
 
 /// The name the built-in floor is reported under.

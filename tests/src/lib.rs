@@ -59,11 +59,15 @@ pub fn scripted_frame(robot: &RobotId, index: usize, tick: u64) -> DetectionFram
         capture_us: DetectionFrame::capture_at_tick(tick),
         pose: Some(FloorPose { position: [3.0 * index as f32, 0.0], heading: 0.1 * index as f32 }),
         image_size: [640.0, 480.0],
-        human: (tick % 11 != index as u64).then(|| HumanDetection {
-            bbox: BBox { x, y: 150.0, w: 40.0, h: 140.0 },
-            keypoints: (0..KEYPOINT_VALUES).map(|i| x + i as f32).collect(),
-            feature: feat(1.0),
-        }),
+        humans: (tick % 11 != index as u64)
+            .then(|| HumanDetection {
+                bbox: BBox { x, y: 150.0, w: 40.0, h: 140.0 },
+                keypoints: (0..KEYPOINT_VALUES).map(|i| x + i as f32).collect(),
+                feature: feat(1.0),
+                track: None,
+            })
+            .into_iter()
+            .collect(),
         objects: (0..(2 + index % 4))
             .map(|k| ObjectDetection {
                 class: ObjectClass::ALL[(k + index) % 10],
@@ -74,6 +78,21 @@ pub fn scripted_frame(robot: &RobotId, index: usize, tick: u64) -> DetectionFram
             .collect(),
         scene_feature: feat(0.0),
     }
+}
+
+/// The Python a test runs its checks with (`SPWI_PYTHON`, else `python3`), if it can
+/// `import` what `imports` names. Without one the test says so loudly and skips what
+/// it would have checked — unless `required_by` is set in the environment (as
+/// `.ci/run` sets it), in which case a missing Python fails the test.
+pub fn python_with(imports: &str, required_by: &str, skipped: &str) -> Option<String> {
+    let python = std::env::var("SPWI_PYTHON").unwrap_or_else(|_| "python3".into());
+    let found = Command::new(&python).args(["-c", &format!("import {imports}")]).status().is_ok_and(|s| s.success());
+    if !found {
+        assert!(std::env::var_os(required_by).is_none(), "{required_by} is set but {python} cannot import {imports}");
+        eprintln!("\n!!!!!!!! SKIPPED {skipped}: {python} cannot import {imports} !!!!!!!!\n");
+        return None;
+    }
+    Some(python)
 }
 
 /// The tick of the fleet's clock now (the host's wall clock).

@@ -84,10 +84,12 @@ async fn a_confident_liar_with_a_valid_certificate_stops_counting() {
             let (stop, rx) = tokio::sync::watch::channel(false);
             let opts = WorldOptions {
                 fleet: hub.fleet.clone(),
+                workers: 1,
                 scenario: Scenario::Dynamic,
                 seed: 3,
                 layout: Layout::default_layout(),
                 zenoh: hub.member_config("world").unwrap().0,
+                credentials: None,
                 stuck_slot: None,
             };
             (stop, tokio::spawn(service::run(opts, rx)))

@@ -60,10 +60,12 @@ async fn a_restarted_world_is_followed_at_once() {
             let (stop, rx) = tokio::sync::watch::channel(false);
             let opts = WorldOptions {
                 fleet: hub.fleet.clone(),
+                workers: 1,
                 scenario: Scenario::Dynamic,
                 seed,
                 layout: Layout::default_layout(),
                 zenoh: hub.peer_config().unwrap(),
+                credentials: None,
                 stuck_slot: None,
             };
             (stop, tokio::spawn(service::run(opts, rx)))

@@ -15,6 +15,7 @@ async fn a_short_headless_demo_reports_every_robot_and_the_churn() {
     within!(60, "demo", async {
         let opts = DemoOptions {
             robots: 3,
+            workers: 1,
             scenario: Scenario::Dynamic,
             seed: 2,
             duration: Duration::from_secs(7),

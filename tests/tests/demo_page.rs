@@ -45,6 +45,7 @@ async fn the_live_page_renders_the_robots_and_updates() {
         let (tx, rx) = tokio::sync::oneshot::channel();
         let opts = DemoOptions {
             robots: 3,
+            workers: 1,
             scenario: Scenario::Dynamic,
             seed: 4,
             duration: Duration::from_secs(25),

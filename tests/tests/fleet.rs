@@ -179,8 +179,30 @@ async fn a_recorded_run_replays_to_the_same_decisions_bit_for_bit() {
         for d in &decided {
             assert_eq!(live[&ids[0]].get(&d.tick), Some(d), "tick {}", d.tick);
         }
+        viewer_reads(&file);
         std::fs::remove_file(file).unwrap();
     });
+}
+
+/// The recording as a viewer reads it: every channel has a JSON Schema and every message
+/// matches it, checked by the `mcap` project's own Python reader (tests/mcap_schemas.py;
+/// `SPWI_PYTHON`, else `python3`). `.ci/run` installs the reader and sets
+/// SPWI_REQUIRE_MCAP_READER=1, so there a missing reader fails the test.
+fn viewer_reads(file: &std::path::Path) {
+    let Some(python) =
+        python_with("mcap, jsonschema", "SPWI_REQUIRE_MCAP_READER", "reading the recording with mcap's reader")
+    else {
+        return;
+    };
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("mcap_schemas.py");
+    let out = std::process::Command::new(&python).arg(script).arg(file).output().unwrap();
+    assert!(
+        out.status.success(),
+        "a viewer cannot read the recording:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{}", String::from_utf8_lossy(&out.stdout).trim());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]

@@ -46,19 +46,11 @@ fn parsed_as_openmetrics(text: &str) -> Option<String> {
     const PARSE: &str =
         "import sys\nfrom prometheus_client.openmetrics.parser import text_string_to_metric_families as p\n\
                          for f in p(sys.stdin.read()): print(f.name, f.type, len(f.samples))";
-    let python = std::env::var("SPWI_PYTHON").unwrap_or_else(|_| "python3".into());
-    let has_parser = std::process::Command::new(&python)
-        .args(["-c", "import prometheus_client.openmetrics.parser"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !has_parser {
-        assert!(
-            std::env::var_os("SPWI_REQUIRE_OPENMETRICS_PARSER").is_none(),
-            "SPWI_REQUIRE_OPENMETRICS_PARSER is set but {python} cannot import prometheus_client"
-        );
-        eprintln!("\n!!!!!!!! SKIPPED parsing /metrics as OpenMetrics: no prometheus_client for {python} !!!!!!!!\n");
-        return None;
-    }
+    let python = python_with(
+        "prometheus_client.openmetrics.parser",
+        "SPWI_REQUIRE_OPENMETRICS_PARSER",
+        "parsing /metrics as OpenMetrics",
+    )?;
     let mut child = std::process::Command::new(&python)
         .args(["-c", PARSE])
         .stdin(std::process::Stdio::piped())
@@ -97,11 +89,20 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         assert_eq!(status["robot"], "h0");
         assert_eq!(status["members"], serde_json::json!(["h0", "h1"]));
         assert!(status["last_decision"]["tick"].as_u64().unwrap() > 0);
+        // Stations by name: the legend of the class numbers, and each recent decision's.
+        assert_eq!(status["stations"], serde_json::json!(["storage", "workstation", "assembly", "manufacturing"]));
+        let recent = status["recent_decisions"].as_array().expect("recent decisions");
+        assert!(recent.iter().any(|d| !d["class"].is_null()), "no recent decision names a class: {recent:?}");
+        for d in recent {
+            let named = d["class"].as_u64().map(|c| status["stations"][c as usize].clone());
+            assert_eq!(d["station"], named.unwrap_or(serde_json::Value::Null), "{d}");
+        }
         assert!(status["fixture_models"].as_bool().unwrap());
         assert!(status["metrics"]["decisions"].as_u64().unwrap() > 0);
         assert_eq!(status["feed_stale"], false);
         assert_eq!(status["stale_peers"], serde_json::json!([]));
         assert_eq!(status["consensus"], "trust");
+        assert!(status["roster_version"].is_null(), "an open fleet holds no roster");
         let trust = status["trust"].as_object().expect("trust per voter");
         assert!(!trust.is_empty() && trust.keys().all(|r| r == "h0" || r == "h1"), "{trust:?}");
         assert!(trust.values().all(|t| (0.0..=1.0).contains(&t.as_f64().unwrap())), "{trust:?}");

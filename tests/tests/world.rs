@@ -40,10 +40,12 @@ async fn agents_decide_on_what_the_simulated_world_shows_them() {
         let (stop_world, rx) = tokio::sync::watch::channel(false);
         let opts = WorldOptions {
             fleet: hub.fleet.clone(),
+            workers: 1,
             scenario: Scenario::Dynamic,
             seed: 11,
             layout: Layout::default_layout(),
             zenoh: hub.peer_config().unwrap(),
+            credentials: None,
             stuck_slot: None,
         };
         let world = tokio::spawn(service::run(opts, rx));
@@ -92,10 +94,12 @@ async fn a_robot_whose_camera_freezes_leaves_the_vote_and_the_others_carry_on() 
         let (stop_world, rx) = tokio::sync::watch::channel(false);
         let opts = WorldOptions {
             fleet: hub.fleet.clone(),
+            workers: 1,
             scenario: Scenario::Dynamic,
             seed: 11,
             layout: Layout::default_layout(),
             zenoh: hub.peer_config().unwrap(),
+            credentials: None,
             stuck_slot: Some(0),
         };
         let world = tokio::spawn(service::run(opts, rx));

@@ -96,10 +96,13 @@ pub fn occlusion(eye: P2, target: P2, height: f32, occluders: &[Occluder], skip:
     worst
 }
 
-/// What a robot's detector is doing between frames (the worker lost for a while).
+/// What a robot's detector is doing between frames (a worker lost for a while).
 #[derive(Debug, Clone, Default)]
 pub struct DetectorState {
+    /// Frames the first worker stays lost.
     pub lost_for: u32,
+    /// The same for each other worker.
+    pub others_lost: Vec<u32>,
 }
 
 /// Everything one camera frame needs to know about the world.
@@ -110,7 +113,8 @@ pub struct Scene<'a> {
     pub occluders: &'a [Occluder],
     /// Index in `occluders` of `objects[0]`.
     pub first_object: usize,
-    pub worker: &'a crate::worker::Worker,
+    /// Every worker on the floor: each hides the others, as a robot does.
+    pub workers: &'a [crate::worker::Worker],
     pub appearance: &'a Appearance,
 }
 
@@ -124,18 +128,9 @@ pub fn detect(
     own_occluder: Option<usize>,
     state: &mut DetectorState,
     rng: &mut ChaCha8Rng,
-) -> DetectionFrame {
+) -> (DetectionFrame, bool) {
     let cam = &scene.layout.camera;
     let in_view = |p: P2| in_view(cam, pose, p);
-    let jitter = |b: BBox, rng: &mut ChaCha8Rng| {
-        let s = |v: f32, rng: &mut ChaCha8Rng| (1.5 + 0.03 * v) * gauss(rng);
-        BBox {
-            x: b.x + s(b.w, rng),
-            y: b.y + s(b.h, rng),
-            w: (b.w + s(b.w, rng)).max(1.0),
-            h: (b.h + s(b.h, rng)).max(1.0),
-        }
-    };
 
     let mut objects = Vec::new();
     let mut seen_classes = Vec::new();
@@ -181,50 +176,106 @@ pub fn detect(
     }
     objects.truncate(MAX_OBJECTS);
 
-    // the worker
-    let wk = scene.worker;
-    let mut human = None;
-    if state.lost_for > 0 {
-        state.lost_for -= 1;
-    } else if rng.gen::<f32>() < 0.015 {
-        state.lost_for = rng.gen_range(3..8);
-    } else if in_view(wk.position) {
-        let occ = occlusion(pose.position, wk.position, WORKER_HEIGHT, scene.occluders, own_occluder);
-        let footprint = Rect {
-            min: sub(wk.position, [WORKER_HALF_WIDTH, WORKER_HALF_WIDTH]),
-            max: add(wk.position, [WORKER_HALF_WIDTH, WORKER_HALF_WIDTH]),
-        };
-        let d = dist(pose.position, wk.position) / cam.range;
-        if occ < 1.0 && rng.gen::<f32>() >= 0.01 + 0.2 * d * d + 0.3 * occ {
-            if let Some(b) = bbox_of(cam, pose, &footprint, WORKER_HEIGHT) {
-                let keypoints: Option<Vec<f32>> =
-                    skeleton::keypoints(wk.position, wk.heading, wk.head_yaw, wk.gait, norm(wk.velocity))
-                        .iter()
-                        .map(|&p| project(cam, pose, p).map(|(u, v)| [u + 2.0 * gauss(rng), v + 2.0 * gauss(rng)]))
-                        .collect::<Option<Vec<_>>>()
-                        .map(|v| v.into_iter().flatten().collect());
-                if let Some(keypoints) = keypoints {
-                    let line_of_sight = sub(wk.position, pose.position);
-                    let orientation = wk.heading - line_of_sight[1].atan2(line_of_sight[0]);
-                    human = Some(HumanDetection {
-                        bbox: jitter(b, rng),
-                        keypoints,
-                        feature: scene.appearance.human(orientation, d, rng),
-                    });
-                }
-            }
+    // the workers, the first first (a world of one draws as it always did)
+    let mut humans = Vec::new();
+    let mut first_seen = false;
+    for (k, wk) in scene.workers.iter().enumerate() {
+        if k > 0 && state.others_lost.len() < k {
+            state.others_lost.resize(k, 0);
+        }
+        let lost_for = if k == 0 { &mut state.lost_for } else { &mut state.others_lost[k - 1] };
+        let others: Vec<Occluder> =
+            scene.workers.iter().enumerate().filter(|&(j, _)| j != k).map(|(_, w)| person(w.position)).collect();
+        if let Some(h) = detect_person(scene, pose, wk, &others, own_occluder, lost_for, rng) {
+            first_seen |= k == 0;
+            humans.push(h);
         }
     }
     let scene_feature = scene.appearance.scene(&seen_classes, rng);
-    DetectionFrame {
+    let frame = DetectionFrame {
         robot,
         capture_us,
         pose: Some(FloorPose { position: pose.position, heading: pose.heading }),
         image_size: [cam.image[0] as f32, cam.image[1] as f32],
-        human,
+        humans,
         objects,
         scene_feature,
+    };
+    (frame, first_seen)
+}
+
+/// A detector's box: jittered by a couple of pixels and a few percent of its size.
+fn jitter(b: BBox, rng: &mut ChaCha8Rng) -> BBox {
+    let s = |v: f32, rng: &mut ChaCha8Rng| (1.5 + 0.03 * v) * gauss(rng);
+    BBox {
+        x: b.x + s(b.w, rng),
+        y: b.y + s(b.h, rng),
+        w: (b.w + s(b.w, rng)).max(1.0),
+        h: (b.h + s(b.h, rng)).max(1.0),
     }
+}
+
+/// A person, as what hides what stands behind it.
+fn person(at: P2) -> Occluder {
+    Occluder { footprint: Rect { min: at, max: at }, circle: Some((at, WORKER_HALF_WIDTH)), height: WORKER_HEIGHT }
+}
+
+/// One worker as a camera at `pose` detects it, if it does: within range and field of
+/// view, not hidden by what stands between (the scene's occluders and the `others`
+/// people), not missed (more often far away and partly hidden), not lost for a few
+/// frames (`lost_for`).
+fn detect_person(
+    scene: &Scene<'_>,
+    pose: Pose,
+    wk: &crate::worker::Worker,
+    others: &[Occluder],
+    own_occluder: Option<usize>,
+    lost_for: &mut u32,
+    rng: &mut ChaCha8Rng,
+) -> Option<HumanDetection> {
+    let cam = &scene.layout.camera;
+    if *lost_for > 0 {
+        *lost_for -= 1;
+        return None;
+    }
+    if rng.gen::<f32>() < 0.015 {
+        *lost_for = rng.gen_range(3..8);
+        return None;
+    }
+    if !in_view(cam, pose, wk.position) {
+        return None;
+    }
+    let occ = occlusion(pose.position, wk.position, WORKER_HEIGHT, scene.occluders, own_occluder).max(occlusion(
+        pose.position,
+        wk.position,
+        WORKER_HEIGHT,
+        others,
+        None,
+    ));
+    let footprint = Rect {
+        min: sub(wk.position, [WORKER_HALF_WIDTH, WORKER_HALF_WIDTH]),
+        max: add(wk.position, [WORKER_HALF_WIDTH, WORKER_HALF_WIDTH]),
+    };
+    let d = dist(pose.position, wk.position) / cam.range;
+    if occ >= 1.0 || rng.gen::<f32>() < 0.01 + 0.2 * d * d + 0.3 * occ {
+        return None;
+    }
+    let b = bbox_of(cam, pose, &footprint, WORKER_HEIGHT)?;
+    let keypoints: Vec<f32> = skeleton::keypoints(wk.position, wk.heading, wk.head_yaw, wk.gait, norm(wk.velocity))
+        .iter()
+        .map(|&p| project(cam, pose, p).map(|(u, v)| [u + 2.0 * gauss(rng), v + 2.0 * gauss(rng)]))
+        .collect::<Option<Vec<_>>>()?
+        .into_iter()
+        .flatten()
+        .collect();
+    let line_of_sight = sub(wk.position, pose.position);
+    let orientation = wk.heading - line_of_sight[1].atan2(line_of_sight[0]);
+    Some(HumanDetection {
+        bbox: jitter(b, rng),
+        keypoints,
+        feature: scene.appearance.human(orientation, d, rng),
+        track: None,
+    })
 }
 
 #[cfg(test)]

@@ -10,6 +10,11 @@
 //!
 //! Ground-truth intent is the goal the worker has committed to: the label changes in
 //! the very tick the worker starts to turn or walk towards the new goal, not before.
+//!
+//! A floor may hold several workers. Each has its own spot at every station (the first
+//! worker the station's work spot, the others a free place beside it, [`spots_of`]), so
+//! two people can work at one station side by side, and each steps round the others
+//! while walking as it steps round robots.
 
 use crate::geometry::*;
 use crate::layout::{Layout, WORKER_CLEARANCE};
@@ -50,6 +55,65 @@ pub struct Worker {
     pub goal_changes: u32,
     /// Trips finished at their labelled station.
     pub arrivals: u32,
+    /// Where this worker works at each station, by class.
+    spots: [P2; NUM_CLASSES],
+}
+
+/// How far from a station's work spot a worker other than the first works there.
+pub const SIDE_BY_SIDE_M: f32 = 1.0;
+/// How far a side-by-side spot keeps from robots' spawns and patrols, metres.
+const ROBOT_CLEARANCE_M: f32 = 1.6;
+/// Within this distance walking workers step round each other, metres.
+const PERSONAL_SPACE_M: f32 = 1.2;
+
+/// Where worker `k` of a floor works at each station: the work spot for the first; for
+/// each other, in turn, the first free place (on the floor, clear of obstacles and the
+/// stations' objects) one to three [`SIDE_BY_SIDE_M`] from the work spot and at least
+/// that far from the places of the workers before it, away from the robots' paths if
+/// any is (the work spot itself if there is none).
+pub fn spots_of(layout: &Layout, with_obstacles: bool, k: usize) -> [P2; NUM_CLASSES] {
+    // Clear of what pushes a walking worker away (obstacle faces within 0.6 m), so it
+    // can stand there.
+    let walls: Vec<Rect> =
+        if with_obstacles { layout.obstacles.iter().map(|o| o.rect().inflate(0.7)).collect() } else { Vec::new() };
+    let [w, h] = layout.floor.size;
+    let objects: Vec<Rect> =
+        layout.stations.iter().flat_map(|s| s.objects.iter().map(|o| o.footprint().inflate(0.3))).collect();
+    // And, where it can be, clear of where robots stand and patrol: a robot yields to a
+    // worker a metre away, while the worker steps back from a robot within 1.5 m.
+    let robot_clearance = |p: P2| {
+        let legs = layout.robots.iter().flat_map(|r| {
+            let closing = r.patrol.last().zip(r.patrol.first()).map(|(a, b)| [*a, *b]);
+            r.patrol.windows(2).map(|l| [l[0], l[1]]).chain(closing).chain(std::iter::once([r.spawn, r.spawn]))
+        });
+        legs.map(|[a, b]| segment_dist(a, b, p)).fold(f32::INFINITY, f32::min)
+    };
+    let free = |p: P2| {
+        p[0] > 0.5
+            && p[0] < w - 0.5
+            && p[1] > 0.5
+            && p[1] < h - 0.5
+            && !walls.iter().chain(&objects).any(|r| r.contains(p))
+    };
+    Station::ALL.map(|class| {
+        let spot = layout.station(class).work_spot;
+        let mut taken = vec![spot];
+        for j in 1..=k {
+            // Three rings of eight directions, starting where worker j's differs.
+            let candidates = (1..=3).flat_map(|ring| {
+                (0..8).map(move |i| {
+                    let a = (j as f32 - 1.0) * std::f32::consts::FRAC_PI_2 + i as f32 * std::f32::consts::FRAC_PI_4;
+                    add(spot, scale([a.cos(), a.sin()], SIDE_BY_SIDE_M * ring as f32))
+                })
+            });
+            let apart: Vec<P2> =
+                candidates.filter(|&p| free(p) && taken.iter().all(|&t| dist(p, t) >= SIDE_BY_SIDE_M - 1e-3)).collect();
+            let clear = apart.iter().find(|&&p| robot_clearance(p) > ROBOT_CLEARANCE_M);
+            let roomiest = || apart.iter().max_by(|a, b| robot_clearance(**a).total_cmp(&robot_clearance(**b)));
+            taken.push(clear.or_else(roomiest).copied().unwrap_or(spot));
+        }
+        taken[k]
+    })
 }
 
 /// Obstacles the worker plans around, inflated by its clearance.
@@ -121,6 +185,12 @@ pub fn next_waypoint(from: P2, to: P2, rects: &[Rect]) -> P2 {
 impl Worker {
     /// A worker at a random free position, heading to a random station.
     pub fn spawn(layout: &Layout, with_obstacles: bool, rng: &mut ChaCha8Rng) -> Worker {
+        Worker::spawn_nth(layout, with_obstacles, 0, rng)
+    }
+
+    /// Worker `k` of a floor ([`spots_of`]), at a random free position, heading to a
+    /// random station.
+    pub fn spawn_nth(layout: &Layout, with_obstacles: bool, k: usize, rng: &mut ChaCha8Rng) -> Worker {
         let [w, h] = layout.floor.size;
         let rects = inflated(layout, with_obstacles);
         let position = loop {
@@ -141,25 +211,40 @@ impl Worker {
             head_yaw: 0.0,
             goal_changes: 0,
             arrivals: 0,
+            spots: spots_of(layout, with_obstacles, k),
         };
-        worker.new_trip(layout, rng, None);
+        worker.new_trip(rng, None);
         worker
     }
 
-    fn new_trip(&mut self, layout: &Layout, rng: &mut ChaCha8Rng, not: Option<Station>) {
+    fn new_trip(&mut self, rng: &mut ChaCha8Rng, not: Option<Station>) {
         self.goal = loop {
             let g = Station::ALL[usize::from(rng.gen_range(0..NUM_CLASSES as u8))];
             if Some(g) != not {
                 break g;
             }
         };
-        let d = dist(self.position, layout.station(self.goal).work_spot);
+        let d = dist(self.position, self.spot());
         // One trip in four changes its goal somewhere along the way.
         self.change_at = (rng.gen::<f32>() < 0.25 && d > 4.0).then(|| rng.gen_range(1.5..d * 0.7));
     }
 
-    /// Advances the worker by `dt` seconds among `robots` (positions, radius 0.35 m).
-    pub fn step(&mut self, dt: f32, layout: &Layout, with_obstacles: bool, robots: &[P2], rng: &mut ChaCha8Rng) {
+    /// Where this worker works at its goal.
+    pub fn spot(&self) -> P2 {
+        self.spots[self.goal.index()]
+    }
+
+    /// Advances the worker by `dt` seconds among `robots` (positions, radius 0.35 m)
+    /// and the other workers (`people`).
+    pub fn step(
+        &mut self,
+        dt: f32,
+        layout: &Layout,
+        with_obstacles: bool,
+        robots: &[P2],
+        people: &[P2],
+        rng: &mut ChaCha8Rng,
+    ) {
         let rects = inflated(layout, with_obstacles);
         match self.phase {
             WorkerPhase::Stationary => {
@@ -171,7 +256,7 @@ impl Worker {
                 }
                 // Committed to the next goal: the label changes now, and so does the motion.
                 let here = self.goal;
-                self.new_trip(layout, rng, Some(here));
+                self.new_trip(rng, Some(here));
                 self.phase = WorkerPhase::Moving;
             }
             WorkerPhase::Transition => {
@@ -182,7 +267,7 @@ impl Worker {
             }
             WorkerPhase::Moving => {}
         }
-        let remaining = dist(self.position, layout.station(self.goal).work_spot);
+        let remaining = dist(self.position, self.spot());
         if remaining < ARRIVED {
             self.phase = WorkerPhase::Stationary;
             self.timer = rng.gen_range(2.0..6.0);
@@ -193,13 +278,13 @@ impl Worker {
         if self.change_at.is_some_and(|at| remaining < at) {
             self.change_at = None;
             let old = self.goal;
-            self.new_trip(layout, rng, Some(old));
+            self.new_trip(rng, Some(old));
             self.change_at = None;
             self.goal_changes += 1;
             self.phase = WorkerPhase::Transition;
             self.timer = TRANSITION_S;
         }
-        let spot = layout.station(self.goal).work_spot;
+        let spot = self.spot();
         let waypoint = next_waypoint(self.position, spot, &rects);
         let remaining = dist(self.position, spot);
         // Slow down over the last metres (never below a quarter of the pace, so it arrives).
@@ -211,6 +296,17 @@ impl Worker {
             let d = norm(away);
             if d < 1.5 && d > 1e-3 {
                 desired = add(desired, scale(unit(away), 1.2 * (1.5 - d) / 1.5));
+            }
+        }
+        // Other people, while walking, push away and to the side (people pass each
+        // other on the right); near its spot a worker goes to work beside them.
+        for &p in people.iter().filter(|_| remaining > SLOW_RADIUS) {
+            let away = sub(self.position, p);
+            let d = norm(away);
+            if d < PERSONAL_SPACE_M && d > 1e-3 {
+                let push = 2.5 * (PERSONAL_SPACE_M - d) / PERSONAL_SPACE_M;
+                let right = [away[1], -away[0]];
+                desired = add(desired, add(scale(unit(away), push), scale(unit(right), push)));
             }
         }
         for r in &rects {
@@ -254,7 +350,7 @@ impl Worker {
     /// otherwise where it walks.
     fn turn_head(&mut self, layout: &Layout) {
         let station = layout.station(self.goal);
-        let near = self.phase == WorkerPhase::Stationary || dist(self.position, station.work_spot) < LOOK_RADIUS;
+        let near = self.phase == WorkerPhase::Stationary || dist(self.position, self.spot()) < LOOK_RADIUS;
         let want = if near {
             let n = station.objects.len() as f32;
             let centre = station.objects.iter().fold([0.0, 0.0], |c, o| add(c, scale(o.position, 1.0 / n)));
@@ -292,7 +388,7 @@ mod tests {
             let mut was_stationary = false;
             for _ in 0..3000 {
                 let prev = w.position;
-                w.step(0.1, &layout, true, &[[10.0, 0.8]], &mut rng);
+                w.step(0.1, &layout, true, &[[10.0, 0.8]], &[], &mut rng);
                 assert!(
                     !walls.iter().any(|r| r.contains(w.position)),
                     "seed {seed}: inside an obstacle at {:?}",
@@ -319,7 +415,7 @@ mod tests {
         let mut w = Worker::spawn(&layout, true, &mut rng);
         let (mut far, mut near, mut looked) = (Vec::new(), Vec::new(), 0);
         for _ in 0..3000 {
-            w.step(0.1, &layout, true, &[], &mut rng);
+            w.step(0.1, &layout, true, &[], &[], &mut rng);
             let d = dist(w.position, layout.station(w.goal).work_spot);
             if w.phase != WorkerPhase::Stationary {
                 let speed = norm(w.velocity);
@@ -346,7 +442,7 @@ mod tests {
             let mut w = Worker::spawn(&layout, true, &mut rng);
             for _ in 0..3000 {
                 let (goal, velocity) = (w.goal, w.velocity);
-                w.step(0.1, &layout, true, &[], &mut rng);
+                w.step(0.1, &layout, true, &[], &[], &mut rng);
                 if w.goal == goal {
                     continue;
                 }

@@ -5,9 +5,15 @@
 //! worker steps round it — whether or not its agent runs. The *fleet* is the set of
 //! slots whose agent runs: only they see through their cameras ([`World::observe`]),
 //! and with the `track` camera policy only they share where the worker was last seen.
-//! Randomness comes in independent streams (the worker, and each slot's detector), so
+//! Randomness comes in independent streams (each worker, and each slot's detector), so
 //! the worker's walk is the same whatever the fleet's size and whatever faults a tool
 //! injects, and a robot's frames do not shift when another robot joins.
+//!
+//! A floor may hold up to [`MAX_WORKERS`] workers, each walking its own work cycle from
+//! its own stream, stepping round the others and hiding them from the cameras. A world
+//! of one worker is the same, value for value, as before there could be more. Frames
+//! carry every worker in view; the truth describes the first (`workers[0]`), whom
+//! the tools score, until the team decides per worker.
 
 use crate::appearance::Appearance;
 use crate::camera::{self, DetectorState, Occluder, Pose, ROBOT_HEIGHT, ROBOT_RADIUS};
@@ -25,6 +31,9 @@ pub const DT: f32 = spwi_proto::TICK_PERIOD.as_secs_f32();
 const ROBOT_SPEED: f32 = 0.5;
 /// How fast a camera pans, radians per tick (≈ 115 °/s: a pan-tilt unit, not a head).
 const PAN_PER_TICK: f32 = 0.2;
+
+/// Most workers one floor holds.
+pub const MAX_WORKERS: usize = 4;
 
 /// The paper's three scenarios, in rising difficulty.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -64,7 +73,8 @@ pub fn stream(seed: u64, part: Stream) -> ChaCha8Rng {
 /// The parts of a world (and of the tools that fault it) that draw random numbers.
 #[derive(Debug, Clone, Copy)]
 pub enum Stream {
-    Worker,
+    /// Worker k's walk and work.
+    Worker(usize),
     /// Robot slot k's camera and detector.
     Detector(usize),
     /// A fault model of a tool (message loss, …), by its own number.
@@ -74,7 +84,9 @@ pub enum Stream {
 impl Stream {
     fn id(self) -> u64 {
         match self {
-            Stream::Worker => 1,
+            // The first worker's stream is the one a world of one worker always drew.
+            Stream::Worker(0) => 1,
+            Stream::Worker(k) => 2_000_000 + k as u64,
             Stream::Detector(k) => 1_000 + k as u64,
             Stream::Fault(k) => 1_000_000 + k,
         }
@@ -112,24 +124,37 @@ pub struct World {
     /// evaluation, datasets); a world serving live agents follows the wall clock
     /// ([`World::follow_clock`]).
     pub clock_epoch_us: u64,
-    pub worker: Worker,
+    /// One or more; the truth describes the first.
+    pub workers: Vec<Worker>,
     pub robots: Vec<RobotState>,
     objects: Vec<Object>,
     /// Obstacles (scenarios 2, 3), objects, then robots: rebuilt when robots move,
     /// shared by every camera of the tick.
     occluders: Vec<Occluder>,
     appearance: Appearance,
-    worker_rng: ChaCha8Rng,
+    /// Each worker's stream.
+    worker_rngs: Vec<ChaCha8Rng>,
     /// Where and when robots of the fleet detected the worker (what `track` cameras
     /// turn to).
     sightings: Sightings,
 }
 
 impl World {
-    /// A world with the first `fleet` slots in the fleet.
+    /// A world of one worker with the first `fleet` slots in the fleet.
     pub fn new(layout: Layout, scenario: Scenario, seed: u64, fleet: usize) -> World {
-        let mut worker_rng = stream(seed, Stream::Worker);
-        let worker = Worker::spawn(&layout, scenario.obstacles(), &mut worker_rng);
+        World::with_workers(layout, scenario, seed, fleet, 1)
+    }
+
+    /// A world of `workers` workers (1..=[`MAX_WORKERS`]) with the first `fleet` slots
+    /// in the fleet.
+    pub fn with_workers(layout: Layout, scenario: Scenario, seed: u64, fleet: usize, workers: usize) -> World {
+        assert!((1..=MAX_WORKERS).contains(&workers), "{workers} workers: 1..={MAX_WORKERS}");
+        let mut worker_rngs: Vec<ChaCha8Rng> = (0..workers).map(|k| stream(seed, Stream::Worker(k))).collect();
+        let workers = worker_rngs
+            .iter_mut()
+            .enumerate()
+            .map(|(k, rng)| Worker::spawn_nth(&layout, scenario.obstacles(), k, rng))
+            .collect();
         let objects = layout.stations.iter().flat_map(|s| s.objects.iter().cloned()).collect();
         let robots = layout
             .robots
@@ -150,12 +175,12 @@ impl World {
             scenario,
             tick: 0,
             clock_epoch_us: 0,
-            worker,
+            workers,
             robots,
             objects,
             occluders: Vec::new(),
             appearance: Appearance::new(),
-            worker_rng,
+            worker_rngs,
             sightings: Sightings::default(),
         };
         world.refresh_occluders();
@@ -171,9 +196,14 @@ impl World {
     pub fn step(&mut self) {
         self.tick += 1;
         let robots: Vec<P2> = self.robots.iter().map(|r| r.pose.position).collect();
-        self.worker.step(DT, &self.layout, self.scenario.obstacles(), &robots, &mut self.worker_rng);
+        for k in 0..self.workers.len() {
+            let people: Vec<P2> =
+                self.workers.iter().enumerate().filter(|&(j, _)| j != k).map(|(_, w)| w.position).collect();
+            let obstacles = self.scenario.obstacles();
+            self.workers[k].step(DT, &self.layout, obstacles, &robots, &people, &mut self.worker_rngs[k]);
+        }
         let centre = scale(self.layout.floor.size, 0.5);
-        let worker = self.worker.position;
+        let people: Vec<P2> = self.workers.iter().map(|w| w.position).collect();
         let track = self.layout.camera.policy == CameraPolicy::Track;
         let sighting = self.sightings.fresh(self.tick);
         // Only `track` cameras split roles; fixed ones need no keeper worked out.
@@ -194,8 +224,8 @@ impl World {
                         r.next_waypoint = (r.next_waypoint + 1) % patrol.len();
                     } else {
                         let next = add(r.pose.position, scale(unit(to), (ROBOT_SPEED * DT).min(norm(to))));
-                        if dist(next, worker) > 1.0 {
-                            r.pose.position = next; // robots yield to the worker
+                        if people.iter().all(|&p| dist(next, p) > 1.0) {
+                            r.pose.position = next; // robots yield to the workers
                         }
                     }
                     // A patrolling robot's pan unit keeps its camera over the floor.
@@ -267,27 +297,35 @@ impl World {
             objects: &self.objects,
             occluders: &self.occluders,
             first_object,
-            worker: &self.worker,
+            workers: &self.workers,
             appearance: &self.appearance,
         };
         let capture_us = self.capture_us();
         let r = &mut self.robots[slot];
-        let frame = camera::detect(&scene, robot.clone(), capture_us, r.pose, Some(own), &mut r.detector, &mut r.rng);
-        if frame.human.is_some() && r.in_fleet {
+        let (frame, first_seen) =
+            camera::detect(&scene, robot.clone(), capture_us, r.pose, Some(own), &mut r.detector, &mut r.rng);
+        // Cameras that track turn to the first worker, whom the truth describes.
+        if first_seen && r.in_fleet {
             r.pan.saw_worker(self.tick);
-            self.sightings.record(self.worker.position, self.tick);
+            self.sightings.record(self.workers[0].position, self.tick);
         }
         frame
     }
 
-    /// Ground truth for this tick.
+    /// The worker the frames show (the first).
+    pub fn worker(&self) -> &Worker {
+        &self.workers[0]
+    }
+
+    /// Ground truth for this tick, of the worker the frames show.
     pub fn truth(&self, robots: &[(usize, RobotId)]) -> TruthMsg {
+        let worker = self.worker();
         TruthMsg {
             tick: self.clock_tick(),
-            intent: self.worker.goal,
-            phase: self.worker.phase,
-            worker_position: self.worker.position,
-            worker_heading: self.worker.heading,
+            intent: worker.goal,
+            phase: worker.phase,
+            worker_position: worker.position,
+            worker_heading: worker.heading,
             robots: robots
                 .iter()
                 .map(|(slot, id)| RobotPose {
@@ -348,7 +386,7 @@ mod tests {
                     w.observe(slot, id);
                 }
             }
-            out.push(format!("{} {:?} {:?}", w.worker.goal, w.worker.phase, w.worker.position));
+            out.push(format!("{} {:?} {:?}", w.worker().goal, w.worker().phase, w.worker().position));
         }
         out
     }
@@ -393,7 +431,7 @@ mod tests {
             for (slot, id) in ids.iter().enumerate() {
                 let f = w.observe(slot, id);
                 let back: DetectionFrame = decode(&encode(&f)).expect("valid frame");
-                seen += usize::from(back.human.is_some());
+                seen += usize::from(back.worker().is_some());
             }
         }
         assert!(seen > 100 && seen < 1200, "worker seen in {seen} of 1200 frames");
@@ -405,9 +443,9 @@ mod tests {
         let id = RobotId::new("r0").unwrap();
         // put the worker straight behind robot 0's camera
         let p = w.robots[0].pose;
-        w.worker.position = sub(p.position, [p.heading.cos() * 0.0, 0.5]);
+        w.workers[0].position = sub(p.position, [p.heading.cos() * 0.0, 0.5]);
         for _ in 0..20 {
-            assert!(w.observe(0, &id).human.is_none());
+            assert!(w.observe(0, &id).worker().is_none());
         }
     }
 
@@ -423,7 +461,7 @@ mod tests {
                 w.step();
                 let mut any = false;
                 for (slot, id) in ids.iter().enumerate() {
-                    any |= w.observe(slot, id).human.is_some();
+                    any |= w.observe(slot, id).worker().is_some();
                 }
                 seen += usize::from(any);
                 ticks += 1;
@@ -455,10 +493,11 @@ mod tests {
                 for (slot, id) in ids.iter().enumerate() {
                     w.observe(slot, id);
                 }
-                let on =
-                    (0..3).filter(|&s| camera::in_view(&w.layout.camera, w.robots[s].pose, w.worker.position)).count();
-                working_for = if w.worker.phase == WorkerPhase::Stationary { working_for + 1 } else { 0 };
-                let tally = match (w.worker.phase, working_for) {
+                let on = (0..3)
+                    .filter(|&s| camera::in_view(&w.layout.camera, w.robots[s].pose, w.worker().position))
+                    .count();
+                working_for = if w.worker().phase == WorkerPhase::Stationary { working_for + 1 } else { 0 };
+                let tally = match (w.worker().phase, working_for) {
                     (WorkerPhase::Stationary, ..10) => continue,
                     (WorkerPhase::Stationary, _) => &mut working,
                     _ => &mut walking,
@@ -497,5 +536,157 @@ mod tests {
         let mut open = World::new(layout, Scenario::Ideal, 1, 2);
         let seen_open = (0..100).filter(|_| is_workbench(&open.observe(1, &id))).count();
         assert!(seen_open > 50, "workbench seen in only {seen_open} of 100 open frames");
+    }
+}
+
+#[cfg(test)]
+mod one_worker {
+    use super::*;
+    use crate::generate;
+
+    /// FNV-1a over the values (not the encoding, which the protocol version changes)
+    /// of every frame and truth message of an episode of 4 robots.
+    pub(super) fn digest(layout: Layout, seed: u64, workers: usize) -> u64 {
+        let mut w = World::with_workers(layout, Scenario::Dynamic, seed, 4, workers);
+        let ids: Vec<(usize, RobotId)> = (0..4).map(|i| (i, RobotId::new(format!("r{i}")).unwrap())).collect();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |bytes: &[u8]| {
+            for b in bytes {
+                h = (h ^ u64::from(*b)).wrapping_mul(0x0100_0000_01b3);
+            }
+        };
+        let floats = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+        let bbox = |b: &BBox| floats(&[b.x, b.y, b.w, b.h]);
+        for _ in 0..300 {
+            w.step();
+            let t = w.truth(&ids);
+            eat(&t.tick.to_le_bytes());
+            eat(&[t.intent.index() as u8, t.phase as u8]);
+            eat(&floats(&[t.worker_position[0], t.worker_position[1], t.worker_heading]));
+            for r in &t.robots {
+                eat(r.robot.as_str().as_bytes());
+                eat(&floats(&[r.position[0], r.position[1], r.heading]));
+            }
+            for (slot, id) in &ids {
+                let f = w.observe(*slot, id);
+                eat(f.robot.as_str().as_bytes());
+                eat(&f.capture_us.to_le_bytes());
+                if let Some(p) = f.pose {
+                    eat(&floats(&[p.position[0], p.position[1], p.heading]));
+                }
+                eat(&floats(&f.image_size));
+                if let Some(person) = f.humans.first() {
+                    eat(&bbox(&person.bbox));
+                    eat(&floats(&person.keypoints));
+                    eat(&floats(&person.feature));
+                }
+                for o in &f.objects {
+                    eat(&[o.class as u8]);
+                    eat(&bbox(&o.bbox));
+                    eat(&floats(&[o.score]));
+                    eat(&floats(&o.feature));
+                }
+                eat(&floats(&f.scene_feature));
+            }
+        }
+        h
+    }
+
+    /// A world of one worker is the world there was before a floor could hold more,
+    /// and before frames could carry several people: its frames and truth, value for
+    /// value (digests taken then).
+    #[test]
+    fn one_worker_is_the_world_it_always_was() {
+        let got = [digest(Layout::default_layout(), 7, 1), digest(generate::layout(3), 11, 1)];
+        assert_eq!(got, [0x4047_d2f9_d0eb_21d3, 0x462d_14f5_57f2_e0d2]);
+    }
+}
+
+#[cfg(test)]
+mod several_workers {
+    use super::*;
+    use crate::generate;
+
+    /// The goals worker `k` walks to, in order, over `ticks`.
+    fn goals(layout: &Layout, seed: u64, workers: usize, k: usize, ticks: usize) -> Vec<Station> {
+        let mut w = World::with_workers(layout.clone(), Scenario::Dynamic, seed, 3, workers);
+        let mut goals = vec![w.workers[k].goal];
+        for _ in 0..ticks {
+            w.step();
+            if goals.last() != Some(&w.workers[k].goal) {
+                goals.push(w.workers[k].goal);
+            }
+        }
+        goals
+    }
+
+    #[test]
+    fn adding_a_worker_changes_no_other_workers_goals() {
+        for (i, layout) in [Layout::default_layout(), generate::layout(5), generate::layout(21)].iter().enumerate() {
+            let alone = goals(layout, 40 + i as u64, 1, 0, 1500);
+            let among_three = goals(layout, 40 + i as u64, 3, 0, 1500);
+            let n = alone.len().min(among_three.len());
+            assert!(n >= 5, "{n} trips");
+            assert_eq!(alone[..n], among_three[..n], "floor {i}: the first worker's goals");
+            assert_eq!(goals(layout, 40 + i as u64, 2, 1, 1500)[..4], goals(layout, 40 + i as u64, 4, 1, 1500)[..4]);
+        }
+    }
+
+    /// Four workers on one floor for two minutes: each keeps working (arrives at its
+    /// goals), walking workers keep their distance, and two work at one station side by
+    /// side now and then.
+    #[test]
+    fn workers_work_side_by_side_and_step_round_each_other() {
+        for seed in 0..3 {
+            let mut w = World::with_workers(generate::layout(30 + seed), Scenario::Dynamic, seed, 3, 4);
+            let (mut closest, mut shared) = (f32::INFINITY, 0);
+            for _ in 0..1200 {
+                w.step();
+                for a in 0..4 {
+                    for b in a + 1..4 {
+                        let (p, q) = (&w.workers[a], &w.workers[b]);
+                        let walking =
+                            |x: &Worker| x.phase != WorkerPhase::Stationary && dist(x.position, x.spot()) > 2.0;
+                        if walking(p) && walking(q) {
+                            closest = closest.min(dist(p.position, q.position));
+                        }
+                        let working = |x: &Worker| x.phase == WorkerPhase::Stationary;
+                        if working(p) && working(q) && p.goal == q.goal {
+                            shared += 1;
+                            assert!(dist(p.position, q.position) > 0.45, "seed {seed}: two workers on one spot");
+                        }
+                    }
+                }
+            }
+            assert!(
+                w.workers.iter().all(|x| x.arrivals >= 5),
+                "{:?}",
+                w.workers.iter().map(|x| x.arrivals).collect::<Vec<_>>()
+            );
+            assert!(closest > 0.45, "seed {seed}: walking workers came within {closest:.2} m");
+            assert!(shared > 0, "seed {seed}: no station was ever shared");
+        }
+    }
+
+    #[test]
+    fn a_worker_hides_another_from_a_camera() {
+        let mut w = World::with_workers(Layout::default_layout(), Scenario::Obstacles, 5, 1, 2);
+        let id = RobotId::new("r0").unwrap();
+        let p = w.robots[0].pose;
+        let ahead = |d: f32, side: f32| {
+            let (c, s) = (p.heading.cos(), p.heading.sin());
+            add(p.position, [d * c - side * s, d * s + side * c])
+        };
+        let frames_with =
+            |w: &mut World, people: usize| (0..40).filter(|_| w.observe(0, &id).humans.len() == people).count();
+        // Side by side, 5 m ahead: both seen.
+        w.workers[0].position = ahead(5.0, 0.6);
+        w.workers[1].position = ahead(5.0, -0.6);
+        assert!(frames_with(&mut w, 2) > 20, "two people side by side");
+        // One behind the other: never both.
+        w.workers[0].position = ahead(5.0, 0.0);
+        w.workers[1].position = ahead(2.5, 0.0);
+        assert_eq!(frames_with(&mut w, 2), 0, "the worker behind another was seen");
+        assert!(frames_with(&mut w, 1) > 20, "the one in front is seen");
     }
 }

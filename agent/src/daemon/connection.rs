@@ -40,14 +40,35 @@ pub(super) struct Connection {
     alive_key: String,
 }
 
+/// How many times [`Connection::reopen`] tries.
+const REOPEN_ATTEMPTS: u32 = 5;
+
+/// How [`Connection::open`] joins.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Joining {
+    /// At start: refuse a robot id that a live daemon holds.
+    First,
+    /// Again, after closing our own session to take a new roster's access rules: our
+    /// token may still be seen for a moment, so there is nothing to check.
+    Again,
+}
+
 impl Connection {
     /// Opens the session, refuses a robot id a live daemon holds, subscribes to what
     /// a robot reads ([`TOPICS_READ`]: its own detections, every robot's shares,
     /// ballots and maps) and declares this robot's liveliness token.
-    pub async fn open(zenoh: zenoh::Config, fleet: &FleetId, robot: &RobotId, queue: usize) -> Result<Connection> {
+    pub async fn open(
+        zenoh: zenoh::Config,
+        fleet: &FleetId,
+        robot: &RobotId,
+        queue: usize,
+        joining: Joining,
+    ) -> Result<Connection> {
         let session = zenoh::open(zenoh).await.map_err(|e| anyhow!("cannot open the Zenoh session: {e}"))?;
         let alive_key = keys::alive(fleet, robot);
-        refuse_duplicate(&session, &alive_key, robot).await?;
+        if joining == Joining::First {
+            refuse_duplicate(&session, &alive_key, robot).await?;
+        }
 
         let (tx, messages) = mpsc::channel::<Message>(queue);
         let overflow = Arc::new(AtomicU64::new(0));
@@ -93,6 +114,24 @@ impl Connection {
         // our subscriptions, declared before on the same links, reach it first.
         let token = session.liveliness().declare_token(&alive_key).await.map_err(|e| anyhow!("{alive_key}: {e}"))?;
         Ok(Connection { session, messages, membership, overflow, token, subscribers, membership_subscriber, alive_key })
+    }
+
+    /// Joins again after [`Connection::close`], with another config (a new roster's
+    /// access rules). Tried a few times: the port the closed session listened on may
+    /// take a moment to be free.
+    pub async fn reopen(zenoh: zenoh::Config, fleet: &FleetId, robot: &RobotId, queue: usize) -> Result<Connection> {
+        let mut tried = 0;
+        loop {
+            match Connection::open(zenoh.clone(), fleet, robot, queue, Joining::Again).await {
+                Ok(c) => return Ok(c),
+                Err(e) if tried + 1 < REOPEN_ATTEMPTS => {
+                    tracing::warn!("reopening the session: {e:#}; trying again");
+                    tried += 1;
+                    tokio::time::sleep(Duration::from_millis(300)).await;
+                }
+                Err(e) => return Err(e.context(format!("reopening the session {REOPEN_ATTEMPTS} times"))),
+            }
+        }
     }
 
     /// Leaves the fleet: the subscriptions end, the token is withdrawn (peers see this

@@ -4,7 +4,7 @@
 use std::time::{Duration, Instant};
 
 /// Logs at most one warning per period and says how many were suppressed.
-pub(super) struct RateLimitedLog {
+pub(crate) struct RateLimitedLog {
     period: Duration,
     last: Option<Instant>,
     suppressed: u64,

@@ -10,28 +10,37 @@
 //! change. The `spwi-agent` process gives its heap's free pages back every half minute
 //! ([`memory`]; once per process, not per daemon, as the heap is the process's).
 //!
+//! In a secured fleet the daemon takes a newer signed roster while it runs
+//! ([`crate::fleet::live`]): from then on a revoked robot's messages are refused and it
+//! is no longer a member, a new robot's signed votes count, and shortly after (spread
+//! over 1.5 s by robot) the session is reopened with the new roster's access rules,
+//! which Zenoh sets only when a session opens. A roster that revokes this robot makes
+//! it leave the fleet.
+//!
 //! Start-up refuses to join a fleet where a live daemon already holds our robot id
 //! (Zenoh would merge the two liveliness tokens into one member); a clash that happens
 //! later (both started at once) is detected from the instance ids in the messages and
 //! reported in logs, `/status` and `/metrics`.
 
 mod connection;
-mod log;
+pub(crate) mod log;
 pub mod memory;
 mod publishing;
 
 use crate::config::AgentConfig;
+use crate::fleet::live::{self, Adopted, Watch};
 use crate::metrics::{DropReason, TransportCounters};
 use crate::record::{PeerState, RecordedConfig, Recorder};
 use crate::status::{Health, RecentDecision, SharedStatus, Status};
 use anyhow::Result;
-use connection::{Connection, Membership, Message};
+use connection::{Connection, Joining, Membership, Message};
 use log::RateLimitedLog;
 use publishing::Outbox;
 use spwi_core::clock::FleetClock;
 use spwi_core::engine::{Engine, EngineConfig, Input, Output};
 use spwi_core::model::{locate, ModelSet};
 use spwi_proto::*;
+use std::collections::VecDeque;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -89,8 +98,14 @@ pub async fn run(
     };
     let mut engine = Engine::new(engine_config, models.inference(config.tick.temporal)?);
 
-    let mut conn = Connection::open(zenoh, &fleet, &robot, config.tick.event_queue).await?;
-    let outbox = Outbox::start(&conn.session, &fleet, &robot).await?;
+    let secured = credentials.is_some();
+    let queue = config.tick.event_queue;
+    let mut conn = Connection::open(zenoh.clone(), &fleet, &robot, queue, Joining::First).await?;
+    let mut outbox = Outbox::start(&conn.session, &fleet, &robot).await?;
+    let mut roster = credentials.clone().map(Watch::new);
+    if let Some(w) = roster.as_mut() {
+        w.listen(&conn.session).await?;
+    }
 
     let mut health = Health::new(Duration::from_millis(config.http.unhealthy_after_ms));
     let status: SharedStatus = Arc::new(Mutex::new(Status {
@@ -103,8 +118,11 @@ pub async fn run(
         temporal: format!("{:?}", config.tick.temporal).to_lowercase(),
         consensus: config.tick.consensus.name().to_owned(),
         identity: credentials.as_ref().map(|c| c.identity.name.to_string()),
+        roster_version: credentials.as_ref().map(|c| c.roster.version),
+        roster_adopted_at: roster.as_ref().map(|w| crate::fleet::authority::rfc3339(w.roster.adopted_at.into())),
         members: engine.members(),
         last_decision: None,
+        stations: crate::status::STATION_NAMES,
         recent_decisions: Default::default(),
         duplicate_robot_id: Vec::new(),
         feed_stale: false,
@@ -122,7 +140,6 @@ pub async fn run(
         http_addr = Some(bound);
         http_task = Some(tokio::spawn(fut));
     }
-    let secured = credentials.is_some();
     tracing::info!(%robot, %fleet, instance, secured, http = ?http_addr, model_set = %models.manifest.name, "joined the fleet");
     if let Some(ready) = ready {
         let _ = ready.send(Started { status: status.clone(), http: http_addr });
@@ -142,17 +159,45 @@ pub async fn run(
     let mut bad_log = RateLimitedLog::new(Duration::from_secs(5));
     let mut slow_log = RateLimitedLog::new(Duration::from_secs(5));
     let mut transport = TransportCounters::default();
+    let mut reopen_at: Option<tokio::time::Instant> = None;
+    // Inputs the daemon makes itself (a revoked robot leaving), handled before the next wait.
+    let mut pending: VecDeque<Input> = VecDeque::new();
+    // In a secured fleet, robots the roster held admits (and this one, whatever its
+    // certificate): anyone else's messages are refused even before the session is
+    // reopened with the roster's access rules.
+    let admitted = |roster: &Option<Watch>, r: &RobotId| {
+        *r == robot || roster.as_ref().is_none_or(|w| w.credentials().admits_robot(r))
+    };
+    let mut left = None;
     loop {
         let deadline = engine.next_deadline().map(|d| tokio::time::Instant::now() + clock.until(d));
         let refresh_at = tokio::time::Instant::from_std(next_refresh);
-        let mut input = tokio::select! {
+        let wake = match pending.pop_front() {
+            Some(input) => Wake::Input(input),
+            None => tokio::select! {
             _ = shutdown.changed() => break,
             Some(Membership { robot: r, alive }) = conn.membership.recv() => {
+                if !admitted(&roster, &r) {
+                    continue; // a revoked robot still running, until its links go
+                }
                 tracing::info!(robot = %r, alive, "membership change");
-                if alive { Input::MemberJoined(r) } else { Input::MemberLeft(r) }
+                Wake::Input(if alive { Input::MemberJoined(r) } else { Input::MemberLeft(r) })
             }
-            msg = conn.messages.recv() => match msg {
+            adopted = live::adopted(roster.as_mut(), &conn.session) => match adopted {
+                Ok(adopted) => Wake::Roster(adopted),
+                Err(e) => {
+                    tracing::error!("{e:#}: this robot leaves the fleet");
+                    left = Some(e);
+                    break;
+                }
+            },
+            _ = sleep_until(reopen_at) => Wake::Reopen,
+            msg = conn.messages.recv() => Wake::Input(match msg {
                 None => break,
+                Some(Message { robot: r, .. }) if !admitted(&roster, &r) => {
+                    transport.bad_messages(DropReason::NotAdmitted, 1);
+                    continue;
+                }
                 Some(Message { topic, robot: r, bytes }) => match Input::from_peer(topic, &r, &bytes) {
                     Ok(Some(i)) => i,
                     Ok(None) => continue, // a topic robots do not read
@@ -162,19 +207,59 @@ pub async fn run(
                         continue;
                     }
                 },
+            }),
+            _ = sleep_until(deadline) => Wake::Input(Input::Poll),
+            _ = tokio::time::sleep_until(refresh_at) => Wake::Input(Input::Poll),
             },
-            _ = sleep_until(deadline) => Input::Poll,
-            _ = tokio::time::sleep_until(refresh_at) => Input::Poll,
+        };
+        let mut input = match wake {
+            Wake::Input(input) => input,
+            Wake::Roster(Adopted { credentials, revoked, .. }) => {
+                if let Some(s) = signed_votes.as_mut() {
+                    s.set_credentials(credentials.clone());
+                }
+                pending.extend(revoked.into_iter().filter(|r| *r != robot).map(Input::MemberLeft));
+                reopen_at = Some(tokio::time::Instant::now() + live::reopen_delay(&robot));
+                if let (Ok(mut s), Some(w)) = (status.lock(), &roster) {
+                    s.roster_version = Some(credentials.roster.version);
+                    s.roster_adopted_at = Some(crate::fleet::authority::rfc3339(w.roster.adopted_at.into()));
+                }
+                continue;
+            }
+            Wake::Reopen => {
+                reopen_at = None;
+                let watch = roster.as_mut().expect("only an adopted roster reopens");
+                let began = Instant::now();
+                outbox.finish().await;
+                conn.close().await;
+                let mut secured_config = zenoh.clone();
+                crate::fleet::secure::apply(&mut secured_config, watch.credentials())?;
+                conn = Connection::reopen(secured_config, &fleet, &robot, queue).await?;
+                outbox = Outbox::start(&conn.session, &fleet, &robot).await?;
+                watch.listen(&conn.session).await?;
+                let held = &watch.roster;
+                tracing::info!(
+                    took_ms = began.elapsed().as_millis() as u64,
+                    version = held.credentials().roster.version,
+                    "reopened the session with the roster's access rules"
+                );
+                continue;
+            }
         };
         let now = clock.now();
         // A tick off our clock is refused by the engine; its votes are not worth
         // checking a signature for.
         let on_clock = input.tick().is_none_or(|t| window.refuses(t, now).is_none());
         if let (Some(s), true) = (signed_votes.as_mut(), on_clock) {
-            let forged = s.check(&mut input);
-            if forged > 0 {
-                transport.bad_messages(DropReason::ForgedRelayedVote, forged as u64);
-                bad_log.warn(|| format!("dropped {forged} relayed vote(s) without their origin's signature"));
+            let checked = s.check(&mut input);
+            if checked.forged > 0 {
+                transport.bad_messages(DropReason::ForgedRelayedVote, checked.forged as u64);
+                bad_log.warn(|| format!("dropped {} relayed vote(s) without their origin's signature", checked.forged));
+            }
+            if !checked.equivocated.is_empty() {
+                transport.bad_messages(DropReason::EquivocatedVote, checked.equivocated.len() as u64);
+                let who: Vec<&str> = checked.equivocated.iter().map(|r| r.as_str()).collect();
+                bad_log.warn(|| format!("{} signed two different votes for one tick (equivocation)", who.join(", ")));
             }
         }
         let membership_change = matches!(input, Input::MemberJoined(_) | Input::MemberLeft(_));
@@ -208,7 +293,7 @@ pub async fn run(
                 s.sign(&mut o);
             }
             if let Output::Decision(m) = &o {
-                decided.push(RecentDecision { tick: m.tick, class: m.steps.first().map(|s| s.class) });
+                decided.push(RecentDecision::of(m));
             }
             if !outbox.publish(&o) {
                 bad_log.warn(|| "Zenoh is holding up publishing: dropping outgoing messages".to_owned());
@@ -221,6 +306,9 @@ pub async fn run(
         // whatever peers send: /status and /metrics follow the engine.
         if !decided.is_empty() || membership_change || Instant::now() >= next_refresh {
             next_refresh = Instant::now() + STATUS_REFRESH;
+            if let Some(w) = &roster {
+                (transport.rosters_adopted, transport.rosters_refused) = (w.roster.adopted, w.roster.refused);
+            }
             let lost = conn.overflow.swap(0, Ordering::Relaxed);
             if lost > 0 {
                 transport.bad_messages(DropReason::QueueFull, lost);
@@ -243,11 +331,25 @@ pub async fn run(
     outbox.finish().await; // what is queued is sent first
     conn.close().await;
     if let Some(t) = http_task {
-        if let Err(e) = t.await {
-            tracing::warn!("the HTTP server task ended badly: {e}");
+        if left.is_some() {
+            t.abort(); // it ends on the shutdown signal, which a robot that leaves by itself never gets
+        }
+        match t.await {
+            Err(e) if !e.is_cancelled() => tracing::warn!("the HTTP server task ended badly: {e}"),
+            _ => {}
         }
     }
-    Ok(())
+    left.map_or(Ok(()), Err)
+}
+
+/// What woke the loop. Short-lived, one at a time: its size does not matter.
+#[allow(clippy::large_enum_variant)]
+enum Wake {
+    Input(Input),
+    /// A newer roster adopted (from our file or heard on the fleet).
+    Roster(Adopted),
+    /// The time to reopen the session with an adopted roster's access rules.
+    Reopen,
 }
 
 /// How often `/status` and `/metrics` are refreshed at least.

@@ -44,17 +44,17 @@ impl Outbox {
                 .express(false)
                 .reliability(zenoh::qos::Reliability::BestEffort)
         };
+        let reliable = |t: Topic| {
+            session.declare_publisher(keys::robot_topic(fleet, robot, t)).reliability(zenoh::qos::Reliability::Reliable)
+        };
         let publishers = Publishers {
             embedding: declare(Topic::Embedding).await.map_err(|e| anyhow!(e))?,
             vote: declare(Topic::Vote).await.map_err(|e| anyhow!(e))?,
             decision: declare(Topic::Decision).await.map_err(|e| anyhow!(e))?,
             ballots: declare(Topic::Ballots).await.map_err(|e| anyhow!(e))?,
             // Sent once when a robot joins, useful for longer than a tick: reliable.
-            map: session
-                .declare_publisher(keys::robot_topic(fleet, robot, Topic::Map))
-                .reliability(zenoh::qos::Reliability::Reliable)
-                .await
-                .map_err(|e| anyhow!(e))?,
+            map: reliable(Topic::Map).await.map_err(|e| anyhow!(e))?,
+            history: reliable(Topic::History).await.map_err(|e| anyhow!(e))?,
         };
         let (tx, rx) = mpsc::channel(OUTGOING_QUEUE);
         let thread = std::thread::Builder::new()
@@ -96,6 +96,7 @@ struct Publishers {
     decision: zenoh::pubsub::Publisher<'static>,
     ballots: zenoh::pubsub::Publisher<'static>,
     map: zenoh::pubsub::Publisher<'static>,
+    history: zenoh::pubsub::Publisher<'static>,
 }
 
 impl Publishers {
@@ -109,6 +110,7 @@ impl Publishers {
                 Topic::Decision => &self.decision,
                 Topic::Ballots => &self.ballots,
                 Topic::Map => &self.map,
+                Topic::History => &self.history,
                 Topic::Detections => unreachable!("agents publish no detections"),
             };
             let started = Instant::now();

@@ -5,13 +5,14 @@
 //! peers relay for it. Keys are written 0600 and never logged; the CA key only has to
 //! stay where members are admitted, every other file is public.
 
-use super::roster::{encode_key, Member, Role, Roster};
+use super::roster::{encode_hex, Member, Role, Roster};
 use super::FleetDir;
 use anyhow::{bail, Context, Result};
 use rcgen::{
     BasicConstraints, CertificateParams, DnType, ExtendedKeyUsagePurpose, IsCa, Issuer, KeyPair, KeyUsagePurpose,
     PKCS_ED25519,
 };
+use ring::signature::Ed25519KeyPair;
 use spwi_proto::{FleetId, RobotId};
 use std::io::Write;
 use std::os::unix::fs::OpenOptionsExt;
@@ -49,21 +50,39 @@ pub fn init(dir: &FleetDir, fleet: &FleetId, validity: Validity) -> Result<()> {
     let cert = params.self_signed(&key)?;
     write_new(&dir.ca_key(), key.serialize_pem().as_bytes(), 0o600)?;
     write_new(&dir.ca_cert(), cert.pem().as_bytes(), 0o644)?;
-    Roster::new(fleet.clone()).save(&dir.roster())
+    save_signed(dir, &mut Roster::new(fleet.clone()), &ca_signer(&key, dir)?)
+}
+
+/// The CA's key as a signer of rosters.
+fn ca_signer(key: &KeyPair, dir: &FleetDir) -> Result<Ed25519KeyPair> {
+    Ed25519KeyPair::from_pkcs8_maybe_unchecked(&key.serialize_der())
+        .map_err(|_| anyhow::anyhow!("{} is not an Ed25519 key (spwi fleets use Ed25519)", dir.ca_key().display()))
+}
+
+/// The CA's key, read from `dir` (refused if others may read it).
+fn read_ca_key(dir: &FleetDir) -> Result<KeyPair> {
+    KeyPair::from_pem(&super::credentials::read_private_key(&dir.ca_key())?)
+        .with_context(|| format!("{} is not a PEM private key", dir.ca_key().display()))
+}
+
+/// Writes `roster` as its next version, signed with the CA's key.
+fn save_signed(dir: &FleetDir, roster: &mut Roster, ca: &Ed25519KeyPair) -> Result<()> {
+    roster.sign_next(|bytes| ca.sign(bytes).as_ref().to_vec());
+    roster.save(&dir.roster())
 }
 
 /// `fleet add`: a key and a certificate for `name` signed by the fleet's CA, and its
 /// roster entry. A name already in the roster is refused, revoked or not (a revoked
 /// name given a new certificate would be admitted again under the same common name).
 pub fn add(dir: &FleetDir, name: &RobotId, role: Role, validity: Validity) -> Result<Member> {
-    let mut roster = Roster::load(&dir.roster())?;
+    let mut roster = super::credentials::load_roster(dir)?;
     if let Some(m) = roster.get(name.as_str()) {
         let state = if m.revoked { "revoked" } else { "admitted" };
         bail!("{name} is already in the roster ({state} {}); names are never reused", m.role.as_str());
     }
     let ca_pem = read(&dir.ca_cert())?;
-    let ca_key = KeyPair::from_pem(&read(&dir.ca_key())?)
-        .with_context(|| format!("{} is not a PEM private key", dir.ca_key().display()))?;
+    let ca_key = read_ca_key(dir)?;
+    let signer = ca_signer(&ca_key, dir)?;
     let issuer = Issuer::from_ca_cert_pem(&ca_pem, ca_key)
         .with_context(|| format!("{} is not a PEM certificate", dir.ca_cert().display()))?;
 
@@ -80,12 +99,12 @@ pub fn add(dir: &FleetDir, name: &RobotId, role: Role, validity: Validity) -> Re
     let member = Member {
         name: name.clone(),
         role,
-        public_key: encode_key(key.public_key_raw()),
+        public_key: encode_hex(key.public_key_raw()),
         not_after: rfc3339(validity.not_after),
         revoked: false,
     };
     roster.members.push(member.clone());
-    roster.save(&dir.roster())?;
+    save_signed(dir, &mut roster, &signer)?;
     Ok(member)
 }
 
@@ -127,10 +146,10 @@ impl Drop for ThrowawayFleet {
     }
 }
 
-/// `fleet revoke`: marks `name` revoked in the roster. Every process given the new
-/// roster denies it everything from its next start; its files are left for the record.
+/// `fleet revoke`: marks `name` revoked in the roster. Every process that adopts the
+/// new roster (`super::live`) denies it everything; its files are left for the record.
 pub fn revoke(dir: &FleetDir, name: &str) -> Result<()> {
-    let mut roster = Roster::load(&dir.roster())?;
+    let mut roster = super::credentials::load_roster(dir)?;
     let Some(m) = roster.members.iter_mut().find(|m| m.name.as_str() == name) else {
         bail!("{name} is not in the roster {}", dir.roster().display());
     };
@@ -138,7 +157,7 @@ pub fn revoke(dir: &FleetDir, name: &str) -> Result<()> {
         bail!("{name} is already revoked");
     }
     m.revoked = true;
-    roster.save(&dir.roster())
+    save_signed(dir, &mut roster, &ca_signer(&read_ca_key(dir)?, dir)?)
 }
 
 pub(crate) fn rfc3339(t: OffsetDateTime) -> String {

@@ -13,12 +13,14 @@
 //! [`authority`] makes and changes it (`spwi-agent fleet init | add | revoke`);
 //! [`credentials`] loads and checks one member's part before a process connects;
 //! [`secure`] turns a Zenoh config into mutual TLS plus access control from the roster;
-//! [`signed_votes`] signs this robot's votes and checks those relayed for others.
+//! [`signed_votes`] signs this robot's votes and checks those relayed for others;
+//! [`live`] takes a newer roster while the process runs.
 //! Without a fleet directory a process runs open (development) and says so loudly.
 
 pub mod authority;
 pub mod cli;
 pub mod credentials;
+pub mod live;
 pub mod roster;
 pub mod secure;
 pub mod signed_votes;

@@ -1,6 +1,12 @@
 //! The roster (`fleet.toml`): who belongs to the fleet, in which role, with which public
 //! key, and who has been revoked. It holds nothing secret; every host gets a copy, and
 //! the access-control rules every process enforces are generated from it.
+//!
+//! It is signed: every change the operator's commands make raises its `version` and
+//! signs it anew with the fleet CA's key ([`Roster::signed_bytes`]), and a process
+//! takes it only if the signature verifies against `ca.crt`
+//! ([`super::credentials::load_roster`]), so a host's copy edited by hand (a member's key
+//! swapped, a revocation undone) is refused, naming the file.
 
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -18,6 +24,9 @@ pub enum Role {
     /// A Zenoh router: relays anything of the fleet, so it is trusted to enforce the
     /// rules on what it relays (it runs the same ones).
     Router,
+    /// A dashboard, planner or logger: may follow everything of the fleet, and publish
+    /// nothing, hold no liveliness token, vote never.
+    Observer,
 }
 
 impl Role {
@@ -26,6 +35,7 @@ impl Role {
             Role::Robot => "robot",
             Role::World => "world",
             Role::Router => "router",
+            Role::Observer => "observer",
         }
     }
 }
@@ -56,23 +66,60 @@ impl Member {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Roster {
     pub fleet: FleetId,
+    /// Raised by every change: a process holding a newer roster refuses an older one.
+    #[serde(default)]
+    pub version: u64,
+    /// The fleet CA's Ed25519 signature over [`Roster::signed_bytes`], hex.
+    #[serde(default)]
+    pub signature: String,
     #[serde(default, rename = "member")]
     pub members: Vec<Member>,
 }
 
 impl Roster {
     pub fn new(fleet: FleetId) -> Roster {
-        Roster { fleet, members: Vec::new() }
+        Roster { fleet, version: 0, signature: String::new(), members: Vec::new() }
+    }
+
+    /// What the CA signs: a label, then the roster as TOML without its signature.
+    pub fn signed_bytes(&self) -> Vec<u8> {
+        let unsigned = Roster { signature: String::new(), ..self.clone() };
+        let mut bytes = b"spwi fleet roster\xff".to_vec();
+        bytes.extend(toml::to_string(&unsigned).expect("a roster serialises").into_bytes());
+        bytes
+    }
+
+    /// The next version, signed by `sign` (the CA's key).
+    pub fn sign_next(&mut self, sign: impl FnOnce(&[u8]) -> Vec<u8>) {
+        self.version += 1;
+        self.signature = encode_hex(&sign(&self.signed_bytes()));
+    }
+
+    /// Whether the signature is the CA's whose raw Ed25519 public key is `ca_key`.
+    pub fn signed_by(&self, ca_key: &[u8]) -> bool {
+        let Some(signature) = decode_hex(&self.signature) else { return false };
+        ring::signature::UnparsedPublicKey::new(&ring::signature::ED25519, ca_key)
+            .verify(&self.signed_bytes(), &signature)
+            .is_ok()
     }
 
     /// Reads and checks `fleet.toml`; every error names the file.
     pub fn load(path: &Path) -> Result<Roster> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("cannot read the roster {}", path.display()))?;
-        let roster: Roster =
-            toml::from_str(&text).with_context(|| format!("roster {} is malformed", path.display()))?;
-        roster.check().with_context(|| format!("roster {}", path.display()))?;
+        Roster::parse(&text).with_context(|| format!("roster {}", path.display()))
+    }
+
+    /// Parses and checks a roster's TOML text (a file's, or one said on the fleet).
+    pub fn parse(text: &str) -> Result<Roster> {
+        let roster: Roster = toml::from_str(text).context("malformed")?;
+        roster.check()?;
         Ok(roster)
+    }
+
+    /// The roster as TOML, as a member says it on the fleet (`super::live`).
+    pub fn said(&self) -> Vec<u8> {
+        toml::to_string(self).expect("a roster serialises").into_bytes()
     }
 
     /// Writes `fleet.toml` (through a temporary file, so a crash leaves the old one).
@@ -80,7 +127,7 @@ impl Roster {
         let tmp = path.with_extension("toml.tmp");
         let text = format!(
             "# spwi fleet roster: written by `spwi-agent fleet`, public, copied to every host.\n{}",
-            toml::to_string(self)?
+            String::from_utf8(self.said())?
         );
         std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
         std::fs::rename(&tmp, path).with_context(|| format!("cannot replace {}", path.display()))
@@ -108,19 +155,22 @@ impl Roster {
     }
 }
 
-pub(crate) fn encode_key(key: &[u8]) -> String {
-    key.iter().map(|b| format!("{b:02x}")).collect()
+pub(crate) fn encode_hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 fn decode_key(hex: &str) -> Option<[u8; 32]> {
-    if hex.len() != 64 || !hex.is_ascii() {
+    if hex.len() != 64 {
         return None;
     }
-    let mut out = [0u8; 32];
-    for (i, byte) in out.iter_mut().enumerate() {
-        *byte = u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).ok()?;
+    decode_hex(hex)?.try_into().ok()
+}
+
+fn decode_hex(hex: &str) -> Option<Vec<u8>> {
+    if !hex.len().is_multiple_of(2) || !hex.is_ascii() {
+        return None;
     }
-    Some(out)
+    (0..hex.len() / 2).map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).ok()).collect()
 }
 
 #[cfg(test)]
@@ -131,7 +181,7 @@ mod tests {
         Member {
             name: RobotId::new(name).unwrap(),
             role: Role::Robot,
-            public_key: encode_key(&[7; 32]),
+            public_key: encode_hex(&[7; 32]),
             not_after: "2027-01-01T00:00:00Z".into(),
             revoked: false,
         }

@@ -15,12 +15,16 @@
 //! - a robot may put only under `spwi/<fleet>/robot/<name>/**` and hold (and answer for)
 //!   only `spwi/<fleet>/alive/<name>`;
 //! - the world may put detections for any robot and `spwi/<fleet>/world/**`;
+//! - a robot or the world may say the roster it holds on `spwi/<fleet>/roster/<name>`
+//!   (it counts only if the fleet's CA signed it, [`super::live`]);
 //! - a router may forward anything of the fleet;
+//! - an observer may say nothing;
 //! - every member may subscribe and ask for liveliness anywhere in the fleet, and is
 //!   sent anything of the fleet.
 //!
 //! Anything else, and anyone else (a revoked member, a certificate of no member), is
-//! denied. Zenoh checks these rules on the last hop only: a message is judged by the
+//! denied. Zenoh 1.10 cannot change these rules in a running session, so a process that
+//! adopts a new roster reopens its session with the new rules ([`super::live`]). Zenoh checks these rules on the last hop only: a message is judged by the
 //! identity of the link it arrives on. In a full peer mesh that link is the author's,
 //! so the rules hold. A router forwards others' messages under its own name, so it must
 //! be trusted: it runs these same rules on what it receives and is the only role
@@ -97,22 +101,30 @@ pub fn access_control(creds: &Credentials) -> Value {
     for m in creds.roster.admitted() {
         let name = m.name.as_str();
         let may_say: Vec<String> = match m.role {
-            Role::Robot => vec![keys::robot_everything(fleet, &m.name), keys::alive(fleet, &m.name)],
-            Role::World => vec![keys::all_robots(fleet, Topic::Detections), keys::world_everything(fleet)],
+            Role::Robot => {
+                vec![keys::robot_everything(fleet, &m.name), keys::alive(fleet, &m.name), keys::roster(fleet, &m.name)]
+            }
+            Role::World => vec![
+                keys::all_robots(fleet, Topic::Detections),
+                keys::world_everything(fleet),
+                keys::roster(fleet, &m.name),
+            ],
             Role::Router => vec![everything.clone()],
+            Role::Observer => vec![],
         };
-        rules.push(json!({
-            "id": format!("says-{name}"),
-            "messages": ["put", "liveliness_token", "reply"],
-            "flows": ["ingress"],
-            "permission": "allow",
-            "key_exprs": may_say,
-        }));
+        let mut own_rules = vec![json!("members-listen"), json!("members-are-told")];
+        if !may_say.is_empty() {
+            rules.push(json!({
+                "id": format!("says-{name}"),
+                "messages": ["put", "liveliness_token", "reply"],
+                "flows": ["ingress"],
+                "permission": "allow",
+                "key_exprs": may_say,
+            }));
+            own_rules.push(json!(format!("says-{name}")));
+        }
         subjects.push(json!({ "id": format!("member-{name}"), "cert_common_names": [name] }));
-        policies.push(json!({
-            "rules": ["members-listen", "members-are-told", format!("says-{name}")],
-            "subjects": [format!("member-{name}")],
-        }));
+        policies.push(json!({ "rules": own_rules, "subjects": [format!("member-{name}")] }));
     }
     json!({
         "enabled": true,

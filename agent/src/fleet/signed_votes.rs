@@ -12,6 +12,12 @@
 //! A vote already heard directly or already verified is recognised by its bytes and
 //! not verified again, so each distinct vote costs at most one verification.
 //!
+//! A member that signs two different votes for one tick (equivocation: telling some
+//! robots one thing and others another, so that their decisions and lessons part) is
+//! caught as soon as both reach one robot: two valid signatures of one origin over two
+//! votes of the same tick and instance are proof. The later copy is dropped and the
+//! proof counted and logged with the member's name ([`Checked::equivocated`]).
+//!
 //! The engine stays unaware: the daemon signs what the engine outputs and filters what
 //! it inputs, so recordings replay without keys.
 
@@ -23,6 +29,22 @@ use std::sync::Arc;
 
 /// Ticks of authentic votes remembered (10 s at 10 Hz; relays come within a tick).
 const KEEP_TICKS: u64 = 100;
+
+/// What [`SignedVotes::check`] dropped from an input.
+#[derive(Debug, Default, PartialEq)]
+pub struct Checked {
+    /// Relayed votes without their origin's signature.
+    pub forged: usize,
+    /// Origins caught signing two different votes for one tick (one entry per proof).
+    pub equivocated: Vec<RobotId>,
+}
+
+enum Authentic {
+    Yes,
+    Forged,
+    /// Signed by its origin, but it signed another vote for the tick.
+    Equivocation,
+}
 
 /// Signs this robot's votes and checks the relayed votes of others.
 pub struct SignedVotes {
@@ -40,6 +62,12 @@ pub struct SignedVotes {
 impl SignedVotes {
     pub fn new(creds: Arc<Credentials>, fleet: FleetId, robot: RobotId) -> SignedVotes {
         SignedVotes { creds, fleet, robot, known: BTreeMap::new(), own: None }
+    }
+
+    /// Checks votes against a newer roster from now on: a newly admitted robot's
+    /// signature counts, a revoked one's no longer does.
+    pub fn set_credentials(&mut self, creds: Arc<Credentials>) {
+        self.creds = creds;
     }
 
     /// Signs this robot's own votes in an output (its vote in its share of a tick, the
@@ -65,37 +93,83 @@ impl SignedVotes {
     }
 
     /// Remembers peers' votes heard directly; drops relayed votes whose origin's
-    /// signature does not verify. Returns how many were dropped. Our own vote, heard
-    /// back or relayed back, is neither kept nor checked: the engine ignores it.
-    pub fn check(&mut self, input: &mut Input) -> usize {
+    /// signature does not verify, and the copies that prove an equivocation. Our own
+    /// vote, heard back or relayed back, is neither kept nor checked: the engine
+    /// ignores it.
+    pub fn check(&mut self, input: &mut Input) -> Checked {
+        let mut checked = Checked::default();
         match input {
             Input::Embedding(e) if e.robot != self.robot => {
                 if let Some(v) = &e.vote {
+                    // Heard directly: the link vouches for it, and it wins over any
+                    // relayed copy; one that differs from a copy its origin signed is
+                    // proof all the same.
                     let bytes = v.signed_bytes(&self.fleet);
+                    if self.known(v).is_some_and(|k| *k != bytes) {
+                        checked.equivocated.push(v.robot.clone());
+                    }
                     self.remember(v, bytes);
                 }
-                0
             }
+            // The relayer's own vote needs no signature (its link vouches for it), nor
+            // ours, which the engine ignores.
             Input::Ballots(b) => {
-                let before = b.votes.len();
-                let relayer = b.robot.clone();
-                b.votes.retain(|v| v.robot == relayer || v.robot == self.robot || self.authentic(v));
-                before - b.votes.len()
+                let vouched = [b.robot.clone(), self.robot.clone()];
+                self.keep_authentic(&vouched, &mut b.votes, &mut checked);
             }
-            _ => 0,
+            // A history's votes are all past ones: each needs its origin's signature,
+            // ours included; its sender's own the engine never takes.
+            Input::History(h) => {
+                let vouched = [h.robot.clone()];
+                for lesson in &mut h.lessons {
+                    self.keep_authentic(&vouched, &mut lesson.votes, &mut checked);
+                }
+            }
+            _ => {}
         }
+        checked
     }
 
-    fn authentic(&mut self, v: &VoteMsg) -> bool {
+    /// Drops from `votes` those of origins other than `vouched` whose signature does
+    /// not verify or that prove an equivocation.
+    fn keep_authentic(&mut self, vouched: &[RobotId], votes: &mut Vec<VoteMsg>, checked: &mut Checked) {
+        votes.retain(|v| {
+            if vouched.contains(&v.robot) {
+                return true;
+            }
+            match self.authentic(v) {
+                Authentic::Yes => true,
+                Authentic::Forged => {
+                    checked.forged += 1;
+                    false
+                }
+                Authentic::Equivocation => {
+                    checked.equivocated.push(v.robot.clone());
+                    false
+                }
+            }
+        });
+    }
+
+    /// The signed bytes of the vote of `v`'s origin and tick known authentic, if any.
+    fn known(&self, v: &VoteMsg) -> Option<&Vec<u8>> {
+        self.known.get(&v.tick).and_then(|m| m.get(&v.robot))
+    }
+
+    fn authentic(&mut self, v: &VoteMsg) -> Authentic {
         let bytes = v.signed_bytes(&self.fleet);
-        if self.known.get(&v.tick).and_then(|m| m.get(&v.robot)) == Some(&bytes) {
-            return true;
+        let same_as_known = self.known(v).map(|k| *k == bytes);
+        if same_as_known == Some(true) {
+            return Authentic::Yes;
         }
-        let ok = self.creds.verify(&v.robot, &bytes, &v.signature);
-        if ok {
-            self.remember(v, bytes);
+        if !self.creds.verify(&v.robot, &bytes, &v.signature) {
+            return Authentic::Forged;
         }
-        ok
+        if same_as_known == Some(false) {
+            return Authentic::Equivocation; // the first stays: it is what we counted
+        }
+        self.remember(v, bytes);
+        Authentic::Yes
     }
 
     fn remember(&mut self, v: &VoteMsg, bytes: Vec<u8>) {
@@ -132,7 +206,7 @@ mod tests {
     }
 
     #[test]
-    fn a_relayed_vote_counts_only_with_its_origins_signature() {
+    fn a_relayed_vote_counts_only_with_its_origins_signature_and_two_signed_versions_prove_equivocation() {
         let members = [("a", Role::Robot), ("b", Role::Robot), ("c", Role::Robot)];
         let fleet = ThrowawayFleet::create("signed", &FleetId::new("f").unwrap(), &members).unwrap();
         let creds = |r: &str| Arc::new(Credentials::load(&fleet.dir, r).unwrap());
@@ -173,22 +247,43 @@ mod tests {
         let forged = VoteMsg { steps: vec![StepVote { class: Station::Assembly, confidence: 0.9 }], ..from_a.clone() };
         let ballots = |votes| Input::Ballots(BallotsMsg { robot: id("b"), instance: 1, tick: 5, votes });
         let mut input = ballots(vec![from_a.clone(), vote("b", 5, 0.5)]);
-        assert_eq!(c().check(&mut input), 0);
+        assert_eq!(c().check(&mut input), Checked::default());
         for bad in [forged.clone(), vote("a", 5, 0.9), signed(&mut b, vote("a", 5, 0.9))] {
             let mut input = ballots(vec![bad, vote("b", 5, 0.5)]);
-            assert_eq!(c().check(&mut input), 1, "a vote of a not signed by a must not count");
+            assert_eq!(c().check(&mut input).forged, 1, "a vote of a not signed by a must not count");
             let Input::Ballots(kept) = input else { unreachable!() };
             assert_eq!(kept.votes, vec![vote("b", 5, 0.5)]);
         }
         // Once a's vote is known (heard directly), a copy of it needs no verification;
         // anything else still does.
         let mut c = c();
-        assert_eq!(c.check(&mut Input::Embedding(share(from_a.clone()))), 0);
-        assert_eq!(c.check(&mut ballots(vec![vote("a", 5, 0.9)])), 0, "the very vote heard directly");
-        assert_eq!(c.check(&mut ballots(vec![forged])), 1);
+        assert_eq!(c.check(&mut Input::Embedding(share(from_a.clone()))), Checked::default());
+        assert_eq!(c.check(&mut ballots(vec![vote("a", 5, 0.9)])), Checked::default(), "the very vote heard directly");
+        assert_eq!(c.check(&mut ballots(vec![forged])).forged, 1);
         // a's vote signed for another fleet of the same CA counts in no other
         let elsewhere = SignedVotes::new(creds("c"), FleetId::new("g").unwrap(), id("c"));
         let mut elsewhere = elsewhere;
-        assert_eq!(elsewhere.check(&mut ballots(vec![from_a])), 1, "signed for fleet f, not g");
+        assert_eq!(elsewhere.check(&mut ballots(vec![from_a.clone()])).forged, 1, "signed for fleet f, not g");
+
+        // a signs a second, different vote for tick 5 and sends it to some robots: the
+        // first robot that holds both has proof, whichever came first and however.
+        let mut liar = signing("a");
+        let other = signed(
+            &mut liar,
+            VoteMsg { steps: vec![StepVote { class: Station::Assembly, confidence: 0.9 }], ..vote("a", 5, 0.9) },
+        );
+        assert_eq!(other.signature.len(), 64);
+        let mut c = signing("c");
+        c.check(&mut Input::Embedding(share(from_a.clone())));
+        let mut input = ballots(vec![other.clone(), vote("b", 5, 0.5)]);
+        assert_eq!(c.check(&mut input), Checked { forged: 0, equivocated: vec![id("a")] });
+        let Input::Ballots(kept) = input else { unreachable!() };
+        assert_eq!(kept.votes, vec![vote("b", 5, 0.5)], "the second version is dropped, the first stays");
+        let mut d = signing("c");
+        assert_eq!(d.check(&mut ballots(vec![other])).equivocated, vec![], "one version alone proves nothing");
+        let mut direct = Input::Embedding(share(from_a));
+        assert_eq!(d.check(&mut direct).equivocated, vec![id("a")], "relayed first, then the other heard directly");
+        let Input::Embedding(e) = direct else { unreachable!() };
+        assert!(e.vote.is_some(), "a vote heard directly is the engine's to weigh");
     }
 }

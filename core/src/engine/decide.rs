@@ -34,8 +34,9 @@ use std::time::{Duration, Instant};
 /// relays, asks and answers of a tick are over well before then.
 pub const LESSON_LAG: u64 = 2;
 
-/// A decided tick's votes, waiting to be learned from; late votes join it.
-pub(super) type Lesson = BTreeMap<RobotId, VoteMsg>;
+/// The votes held for a decided tick, by voter: a lesson waiting to be learned (late
+/// votes join it), or one learned and kept for newcomers ([`super::history`]).
+pub(super) type VotesHeld = BTreeMap<RobotId, VoteMsg>;
 
 impl Engine {
     pub(super) fn advance_all(&mut self, now: Duration, out: &mut Vec<Output>) {
@@ -87,6 +88,7 @@ impl Engine {
         let members = || std::iter::once(&self.cfg.robot).chain(self.live.iter());
         let anyone_trusted = all.iter().any(|b| trusted(&b)) || members().any(|r| self.trust.counts(r));
         let mut counted: Vec<Ballot<'_>> = all.iter().filter(|b| !anyone_trusted || trusted(b)).copied().collect();
+        self.metrics.doubted_only_ticks += u64::from(counted.is_empty() && !all.is_empty());
         // Nor does a voter not yet established decide a tick alone while another
         // member we trust is live: the tick goes without a class until the team has
         // judged it.
@@ -94,6 +96,7 @@ impl Engine {
             let others_trusted = members().any(|m| m != alone.robot && self.trust.counts(m));
             if others_trusted && !self.trust.established(alone.robot) {
                 counted.clear();
+                self.metrics.lone_stranger_ticks += 1;
             }
         }
         let steps = consensus::decide(&mut counted, self.cfg.consensus);
@@ -101,6 +104,7 @@ impl Engine {
         let voters: Vec<RobotId> = counted.iter().map(|b| b.robot.clone()).collect();
         self.metrics.votes_set_aside += (all.len() - counted.len()) as u64;
         self.lessons.insert(t, tick.votes.clone());
+        self.first_decided.get_or_insert(t);
         self.metrics.observe(Stage::Consensus, t0.elapsed());
         if let Some(arrived) = tick.own_frame {
             self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(arrived));
@@ -138,20 +142,27 @@ impl Engine {
     /// trust held now, the same on every robot that learned the same lessons.
     fn learn_lessons_before(&mut self, t: u64) {
         while let Some(entry) = self.lessons.first_entry().filter(|e| e.key() + LESSON_LAG <= t) {
-            let votes = entry.remove();
-            // A map by robot: the ballots are in robot order, as learning wants them.
-            let ballots: Vec<Ballot<'_>> = votes.values().map(|v| Ballot::of(v, self.trust.weight(&v.robot))).collect();
-            self.trust.learn(&ballots);
-            let estimates: Vec<(&RobotId, &WorkerEstimate)> =
-                votes.values().filter_map(|v| Some((&v.robot, v.worker.as_ref()?))).collect();
-            self.trust.learn_tracks(&estimates);
-            // Where the voters we believe put the worker, for hindsight.
-            let worker: Vec<&WorkerEstimate> =
-                estimates.iter().filter(|(r, _)| self.trust.fuses(r)).map(|(_, e)| *e).collect();
-            let named = votes.values().filter_map(|v| Some((v.robot.clone(), v.steps.first()?.class))).collect();
-            let judged = self.hindsight.learn(named, &worker, &self.floor.team_map.stations());
-            self.trust.learn_hindsight(&judged);
+            let (tick, votes) = entry.remove_entry();
+            self.learn(&votes);
+            self.keep_learned(tick, votes);
         }
+    }
+
+    /// Learns one tick's votes: each voter judged against the others, its estimate
+    /// against theirs, and its vote, later, by where the worker stays.
+    pub(super) fn learn(&mut self, votes: &VotesHeld) {
+        // A map by robot: the ballots are in robot order, as learning wants them.
+        let ballots: Vec<Ballot<'_>> = votes.values().map(|v| Ballot::of(v, self.trust.weight(&v.robot))).collect();
+        self.trust.learn(&ballots);
+        let estimates: Vec<(&RobotId, &WorkerEstimate)> =
+            votes.values().filter_map(|v| Some((&v.robot, v.worker.as_ref()?))).collect();
+        self.trust.learn_tracks(&estimates);
+        // Where the voters we believe put the worker, for hindsight.
+        let worker: Vec<&WorkerEstimate> =
+            estimates.iter().filter(|(r, _)| self.trust.fuses(r)).map(|(_, e)| *e).collect();
+        let named = votes.values().filter_map(|v| Some((v.robot.clone(), v.steps.first()?.class))).collect();
+        let judged = self.hindsight.learn(named, &worker, &self.floor.team_map.stations());
+        self.trust.learn_hindsight(&judged);
     }
 
     /// A vote for a tick we decided already: it joins the tick's lesson if it has none

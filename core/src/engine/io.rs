@@ -1,7 +1,7 @@
 //! What happens to a robot ([`Input`]) and what it publishes ([`Output`]), and the one
-//! mapping between them and the wire: which topic each travels on, its bytes, and which
-//! topics a robot reads at all. The daemon, the recorder and the evaluation's simulated
-//! bus all go through here.
+//! mapping between them and the wire: which topic each travels on, its bytes (and its
+//! JSON, as recordings hold it), and which topics a robot reads at all. The daemon, the
+//! recorder and the evaluation's simulated bus all go through here.
 
 use spwi_proto::keys::Topic;
 use spwi_proto::*;
@@ -16,6 +16,8 @@ pub enum Input {
     Ballots(BallotsMsg),
     /// Where a member's map puts the stations (sent when a robot joins).
     Map(MapMsg),
+    /// The lessons a member learned lately (sent when a robot joins).
+    History(HistoryMsg),
     MemberJoined(RobotId),
     MemberLeft(RobotId),
     /// Time passed: deadlines may have expired.
@@ -29,7 +31,7 @@ impl Input {
             Input::Frame(f) => Some(f.tick()),
             Input::Embedding(e) => Some(e.tick),
             Input::Ballots(b) => Some(b.tick),
-            Input::Map(_) | Input::MemberJoined(_) | Input::MemberLeft(_) | Input::Poll => None,
+            Input::Map(_) | Input::History(_) | Input::MemberJoined(_) | Input::MemberLeft(_) | Input::Poll => None,
         }
     }
 }
@@ -45,49 +47,84 @@ pub enum Output {
     Decision(DecisionMsg),
     /// Our team map, for a robot that just joined.
     Map(MapMsg),
+    /// The lessons we learned lately, for a robot that just joined.
+    History(HistoryMsg),
 }
 
-/// The topics a robot reads: its own detections, and its peers' shares, ballots and
-/// maps. Votes alone and decisions are for observers: a robot reads both in its peers'
-/// shares (the vote inside, the verdict in brief).
-pub const TOPICS_READ: [Topic; 4] = [Topic::Detections, Topic::Embedding, Topic::Ballots, Topic::Map];
+/// The topics a robot reads: its own detections, and its peers' shares, ballots, maps
+/// and histories. Votes alone and decisions are for observers: a robot reads both in
+/// its peers' shares (the vote inside, the verdict in brief).
+pub const TOPICS_READ: [Topic; 5] = [Topic::Detections, Topic::Embedding, Topic::Ballots, Topic::Map, Topic::History];
+
+/// How a message is written down: on the wire (the codec's bytes) or in a recording
+/// (JSON, which a viewer reads). One mapping of messages to topics serves both.
+#[derive(Debug, Clone, Copy)]
+enum Form {
+    Wire,
+    Recording,
+}
+
+impl Form {
+    fn write<M: Message>(self, m: &M) -> Vec<u8> {
+        match self {
+            Form::Wire => encode(m),
+            Form::Recording => to_json(m),
+        }
+    }
+
+    /// A message of this form; on the wire, one `from` published must name it.
+    fn read<M: Message>(self, bytes: &[u8], from: Option<&RobotId>) -> Result<M, DecodeError> {
+        match (self, from) {
+            (Form::Wire, Some(robot)) => decode_from(bytes, robot),
+            (Form::Wire, None) => decode(bytes),
+            (Form::Recording, _) => from_json(bytes),
+        }
+    }
+}
 
 impl Input {
     /// A message that `from` published on `topic`, as the engine takes it; the message
     /// must name `from` as its robot. `Ok(None)` for a topic robots do not read
     /// ([`TOPICS_READ`]).
     pub fn from_peer(topic: Topic, from: &RobotId, bytes: &[u8]) -> Result<Option<Input>, DecodeError> {
-        Input::decode(topic, bytes, Some(from))
+        Input::read(Form::Wire, topic, bytes, Some(from))
     }
 
-    /// A message input as a recording holds it (its origin was checked on arrival).
-    pub fn from_recording(topic: Topic, bytes: &[u8]) -> Result<Option<Input>, DecodeError> {
-        Input::decode(topic, bytes, None)
-    }
-
-    fn decode(topic: Topic, bytes: &[u8], from: Option<&RobotId>) -> Result<Option<Input>, DecodeError> {
-        fn read<M: Message>(bytes: &[u8], from: Option<&RobotId>) -> Result<M, DecodeError> {
-            match from {
-                Some(robot) => decode_from(bytes, robot),
-                None => decode(bytes),
-            }
-        }
-        Ok(Some(match topic {
-            Topic::Detections => Input::Frame(read(bytes, from)?),
-            Topic::Embedding => Input::Embedding(read(bytes, from)?),
-            Topic::Ballots => Input::Ballots(read(bytes, from)?),
-            Topic::Map => Input::Map(read(bytes, from)?),
-            Topic::Vote | Topic::Decision => return Ok(None),
-        }))
+    /// A message input as a recording holds it: JSON ([`to_json`]; its origin was
+    /// checked on arrival).
+    pub fn from_recording(topic: Topic, json: &[u8]) -> Result<Option<Input>, DecodeError> {
+        Input::read(Form::Recording, topic, json, None)
     }
 
     /// The topic and bytes of a message input; `None` for membership and polls.
     pub fn to_wire(&self) -> Option<(Topic, Vec<u8>)> {
+        self.write(Form::Wire)
+    }
+
+    /// The topic and JSON of a message input, as a recording holds it; `None` for
+    /// membership and polls.
+    pub fn to_recording(&self) -> Option<(Topic, Vec<u8>)> {
+        self.write(Form::Recording)
+    }
+
+    fn read(form: Form, topic: Topic, bytes: &[u8], from: Option<&RobotId>) -> Result<Option<Input>, DecodeError> {
+        Ok(Some(match topic {
+            Topic::Detections => Input::Frame(form.read(bytes, from)?),
+            Topic::Embedding => Input::Embedding(form.read(bytes, from)?),
+            Topic::Ballots => Input::Ballots(form.read(bytes, from)?),
+            Topic::Map => Input::Map(form.read(bytes, from)?),
+            Topic::History => Input::History(form.read(bytes, from)?),
+            Topic::Vote | Topic::Decision => return Ok(None),
+        }))
+    }
+
+    fn write(&self, form: Form) -> Option<(Topic, Vec<u8>)> {
         Some(match self {
-            Input::Frame(m) => (Topic::Detections, encode(m)),
-            Input::Embedding(m) => (Topic::Embedding, encode(m)),
-            Input::Ballots(m) => (Topic::Ballots, encode(m)),
-            Input::Map(m) => (Topic::Map, encode(m)),
+            Input::Frame(m) => (Topic::Detections, form.write(m)),
+            Input::Embedding(m) => (Topic::Embedding, form.write(m)),
+            Input::Ballots(m) => (Topic::Ballots, form.write(m)),
+            Input::Map(m) => (Topic::Map, form.write(m)),
+            Input::History(m) => (Topic::History, form.write(m)),
             Input::MemberJoined(_) | Input::MemberLeft(_) | Input::Poll => return None,
         })
     }
@@ -96,26 +133,38 @@ impl Input {
 impl Output {
     /// The topic it is published on, and its bytes.
     pub fn to_wire(&self) -> (Topic, Vec<u8>) {
-        match self {
-            Output::Embedding(m) => (Topic::Embedding, encode(m)),
-            Output::Vote(m) => (Topic::Vote, encode(m)),
-            Output::Ballots(m) => (Topic::Ballots, encode(m)),
-            Output::Decision(m) => (Topic::Decision, encode(m)),
-            Output::Map(m) => (Topic::Map, encode(m)),
-        }
+        self.write(Form::Wire)
     }
 
-    /// An output as a recording holds it. `Ok(None)` for a topic robots do not publish
-    /// (detections).
-    pub fn from_recording(topic: Topic, bytes: &[u8]) -> Result<Option<Output>, DecodeError> {
+    /// The topic it is published on, and its JSON, as a recording holds it.
+    pub fn to_recording(&self) -> (Topic, Vec<u8>) {
+        self.write(Form::Recording)
+    }
+
+    /// An output as a recording holds it (JSON). `Ok(None)` for a topic robots do not
+    /// publish (detections).
+    pub fn from_recording(topic: Topic, json: &[u8]) -> Result<Option<Output>, DecodeError> {
+        let form = Form::Recording;
         Ok(Some(match topic {
-            Topic::Embedding => Output::Embedding(decode(bytes)?),
-            Topic::Vote => Output::Vote(decode(bytes)?),
-            Topic::Ballots => Output::Ballots(decode(bytes)?),
-            Topic::Decision => Output::Decision(decode(bytes)?),
-            Topic::Map => Output::Map(decode(bytes)?),
+            Topic::Embedding => Output::Embedding(form.read(json, None)?),
+            Topic::Vote => Output::Vote(form.read(json, None)?),
+            Topic::Ballots => Output::Ballots(form.read(json, None)?),
+            Topic::Decision => Output::Decision(form.read(json, None)?),
+            Topic::Map => Output::Map(form.read(json, None)?),
+            Topic::History => Output::History(form.read(json, None)?),
             Topic::Detections => return Ok(None),
         }))
+    }
+
+    fn write(&self, form: Form) -> (Topic, Vec<u8>) {
+        match self {
+            Output::Embedding(m) => (Topic::Embedding, form.write(m)),
+            Output::Vote(m) => (Topic::Vote, form.write(m)),
+            Output::Ballots(m) => (Topic::Ballots, form.write(m)),
+            Output::Decision(m) => (Topic::Decision, form.write(m)),
+            Output::Map(m) => (Topic::Map, form.write(m)),
+            Output::History(m) => (Topic::History, form.write(m)),
+        }
     }
 
     /// What a peer takes in of it: `None` for votes alone and decisions, which robots
@@ -125,6 +174,7 @@ impl Output {
             Output::Embedding(m) => Some(Input::Embedding(m.clone())),
             Output::Ballots(m) => Some(Input::Ballots(m.clone())),
             Output::Map(m) => Some(Input::Map(m.clone())),
+            Output::History(m) => Some(Input::History(m.clone())),
             Output::Vote(_) | Output::Decision(_) => None,
         }
     }
@@ -142,12 +192,14 @@ mod tests {
         let outputs = [
             Output::Map(MapMsg { robot: robot.clone(), instance: 7, stations: Default::default() }),
             Output::Ballots(BallotsMsg { robot: robot.clone(), instance: 7, tick: 3, votes: vec![] }),
+            Output::History(HistoryMsg { robot: robot.clone(), instance: 7, lessons: vec![] }),
         ];
         for o in outputs {
             let (topic, bytes) = o.to_wire();
             assert!(TOPICS_READ.contains(&topic));
             assert_eq!(Input::from_peer(topic, &robot, &bytes).unwrap(), o.to_peer());
-            assert_eq!(Output::from_recording(topic, &bytes).unwrap(), Some(o.clone()));
+            let (same, json) = o.to_recording();
+            assert_eq!((same, Output::from_recording(topic, &json).unwrap()), (topic, Some(o.clone())));
             let other = RobotId::new("r2").unwrap();
             assert!(Input::from_peer(topic, &other, &bytes).is_err(), "a message must name its publisher");
         }

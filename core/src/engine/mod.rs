@@ -19,13 +19,15 @@
 //!
 //! The rooms: [`config`] (the rules an engine runs by), [`io`] (inputs, outputs and
 //! their wire), `step` (our frame and vote, a peer's share), `admission` (which ticks
-//! and messages are let in, on the fleet's clock), `rounds` (relay, ask, answer) and
-//! `decide` (the decision and what it teaches). This file holds the state and
+//! and messages are let in, on the fleet's clock), `rounds` (relay, ask, answer),
+//! `decide` (the decision and what it teaches) and `history` (what a newcomer learns
+//! of it from its peers). This file holds the state and
 //! [`Engine::handle`], which sends each input to its room.
 
 mod admission;
 pub mod config;
 mod decide;
+mod history;
 pub mod io;
 mod rounds;
 mod step;
@@ -116,7 +118,13 @@ pub struct Engine {
     /// Instance ids of other daemons seen using our robot id.
     duplicates: BTreeSet<u64>,
     /// Decided ticks' votes, to learn from [`decide::LESSON_LAG`] ticks later.
-    lessons: BTreeMap<u64, decide::Lesson>,
+    lessons: BTreeMap<u64, decide::VotesHeld>,
+    /// Lessons learned, the latest [`MAX_HISTORY_TICKS`], for members that join.
+    learned: BTreeMap<u64, decide::VotesHeld>,
+    /// The first tick we decided: a peer's history teaches only ticks before it.
+    first_decided: Option<u64>,
+    /// Histories asked for and answered.
+    history: history::HistoryState,
     /// Learned lessons' votes, waiting to be judged by where the worker stays.
     hindsight: Hindsight,
     /// Each live peer's instance, as it last spoke to us directly: the only one whose
@@ -180,6 +188,9 @@ impl Engine {
             metrics: Metrics::default(),
             duplicates: BTreeSet::new(),
             lessons: BTreeMap::new(),
+            learned: BTreeMap::new(),
+            first_decided: None,
+            history: Default::default(),
             hindsight: Hindsight::default(),
             instances: BTreeMap::new(),
             peer_clocks: BTreeMap::new(),
@@ -278,14 +289,17 @@ impl Engine {
                     self.floor.team_map.borrow(&m.stations);
                 }
             }
+            Input::History(h) => self.on_history(h, now, &mut out),
             Input::MemberJoined(r) => {
                 // A robot that joins has mapped nothing yet: we tell it what we have.
-                if r != self.cfg.robot && self.live.insert(r) {
+                // (What it learned it asks for itself, as do we while we are new.)
+                if r != self.cfg.robot && self.live.insert(r.clone()) {
                     let stations = self.floor.team_map.own_stations();
                     if stations.iter().any(Option::is_some) {
                         let (robot, instance) = (self.cfg.robot.clone(), self.cfg.instance);
                         out.push(Output::Map(MapMsg { robot, instance, stations }));
                     }
+                    self.ask_for_history(now, &mut out);
                 }
             }
             Input::MemberLeft(r) => {
@@ -297,7 +311,10 @@ impl Engine {
                 self.peer_views.remove(&r);
                 self.advance_all(now, &mut out);
             }
-            Input::Poll => self.advance_all(now, &mut out),
+            Input::Poll => {
+                self.ask_for_history(now, &mut out);
+                self.advance_all(now, &mut out);
+            }
         }
         out
     }

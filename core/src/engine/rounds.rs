@@ -26,7 +26,7 @@ use std::time::Duration;
 /// Where robot `robot` ranks among tick `tick`'s relayers (lower first): FNV-1a of the
 /// two, then a 64-bit finaliser (splitmix64's) so that every bit of the tick moves the
 /// order.
-fn relay_rank(tick: u64, robot: &RobotId) -> u64 {
+pub(super) fn relay_rank(tick: u64, robot: &RobotId) -> u64 {
     let mut fnv = Fnv1a::default();
     fnv.eat(&tick.to_le_bytes());
     fnv.eat(robot.as_str().as_bytes());

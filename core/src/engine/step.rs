@@ -71,8 +71,10 @@ impl Engine {
             return;
         }
         self.metrics.frames += 1;
+        // Of the people in view, the worker we track comes first (and alone counts).
+        self.floor.follow(&mut f);
         let was_stale = self.feed_is_stale();
-        let detection = f.human.as_ref().map(|h| {
+        let detection = f.worker().map(|h| {
             let b = h.bbox;
             [b.x, b.y, b.w, b.h].into_iter().chain(h.keypoints.iter().copied())
         });
@@ -92,7 +94,7 @@ impl Engine {
         if stale {
             // Nothing of a frozen frame is evidence: not the worker, not the objects.
             self.metrics.repeated_frames += 1;
-            f.human = None;
+            f.humans.clear();
             f.objects.clear();
         }
         // The track first: a graph of floor relations places the objects against it.
@@ -120,7 +122,7 @@ impl Engine {
                 }
             }
         };
-        let keypoints = f.human.as_ref().map(|h| temporal::normalise_keypoints(&h.keypoints, f.image_size));
+        let keypoints = f.worker().map(|h| temporal::normalise_keypoints(&h.keypoints, f.image_size));
         let visibility = f.visibility();
         let quality = vote::view_quality(&f);
         // Shared whatever our set reads: a peer's set may read the team's facing.
@@ -231,7 +233,7 @@ impl Engine {
         let fused_peers = if slots > 0 { team.kept_peers(&sightings, |i| robots[i] == me) } else { Vec::new() };
         let peers_mean =
             temporal::mean(peers.iter().filter(|(r, _)| trust.fuses(r)).filter_map(|(_, v)| v.embedding.as_deref()));
-        self.floor.observe_worker(own.worker.as_ref(), team.track.as_ref());
+        self.floor.observe_worker(t, own.worker.as_ref(), team.track.as_ref());
         let will_vote = own.will_vote;
         // The ego model reads our own track, facing and map, the collective the team's.
         let (worker, facing, stations) = match self.cfg.temporal {

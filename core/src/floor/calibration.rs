@@ -149,7 +149,7 @@ impl CameraCalibration {
     /// [`Self::worker_facing`] of the worker a frame shows, if the frame carries its
     /// robot's pose.
     pub fn facing_in(&self, frame: &DetectionFrame) -> Option<f32> {
-        self.worker_facing(frame.pose.as_ref()?, &frame.human.as_ref()?.keypoints)
+        self.worker_facing(frame.pose.as_ref()?, &frame.worker()?.keypoints)
     }
 
     /// Where a detected object stands on the floor, and how sure that is (m): the

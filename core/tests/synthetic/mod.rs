@@ -13,11 +13,12 @@ pub fn frame(tick: u64, objects: usize) -> DetectionFrame {
         capture_us: DetectionFrame::capture_at_tick(tick),
         pose: Some(FloorPose { position: [2.0, 3.0], heading: 0.4 }),
         image_size: [640.0, 480.0],
-        human: Some(HumanDetection {
+        humans: vec![HumanDetection {
             bbox: BBox { x: 300.0, y: 100.0, w: 50.0, h: 200.0 },
             keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32).collect(),
             feature: feature(1.0),
-        }),
+            track: None,
+        }],
         objects: (0..objects)
             .map(|k| ObjectDetection {
                 class: ObjectClass::ALL[k % ObjectClass::ALL.len()],

@@ -18,5 +18,6 @@ fuzz_target!(|data: &[u8]| {
     check::<DecisionMsg>(data);
     check::<BallotsMsg>(data);
     check::<MapMsg>(data);
+    check::<HistoryMsg>(data);
     check::<TruthMsg>(data);
 });

@@ -138,6 +138,9 @@ pub fn main(a: EvalArgs) -> Result<()> {
         None => Default::default(),
     };
     let root = spwi_core::model::locate::sets_folder(spwi_core::model::locate::DEFAULT_SET)?;
+    if all && world.workers != 1 {
+        anyhow::bail!("--all --workers {}: the results page's studies are of one worker", world.workers);
+    }
     if all {
         let settings = crate::eval::studies::Settings {
             models_root: root.clone(),
@@ -185,6 +188,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
     let models = spwi_core::model::ModelSet::load(&dir, spwi_core::model::Backend::Tract, None)?;
     let report = crate::eval::run(&crate::eval::EvalOptions {
         scenario: world.scenario,
+        workers: usize::from(world.workers),
         robots,
         models,
         floors,

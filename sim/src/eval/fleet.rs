@@ -58,6 +58,11 @@ pub struct Tallies {
     /// team map (no relation row describes it).
     pub collective_goal_unmapped: Tally,
     pub cnn1d: Tally,
+    /// The collective and the team's decision on the same robot-ticks: those on which
+    /// the robot's collective predicted and it decided a class (each figure above
+    /// counts its own ticks).
+    pub paired_collective: Tally,
+    pub paired_consensus: Tally,
     /// How well the robots' team maps place the stations, over the scored robot-ticks.
     pub map: MapQuality,
     /// The same, on the ticks where the worker heads to a station of a close pair.
@@ -75,6 +80,12 @@ pub struct Tallies {
     pub confusion_collective: Confusion,
     /// Ticks on which some robot decided something.
     pub decided_ticks: u64,
+    /// Ticks on which some robot voted and none decided a class.
+    pub voted_undecided_ticks: u64,
+    /// Robot-ticks left without a class by the lone-voter rule, and because every voter
+    /// was doubted (the engines' own counts).
+    pub lone_stranger_robot_ticks: u64,
+    pub doubted_only_robot_ticks: u64,
     /// Of those, the ticks on which every live robot decided the same class for t.
     pub agreement: Agreement,
     /// Ticks evaluated.
@@ -100,6 +111,8 @@ impl Tallies {
             (&mut self.cvm_mapped, &o.cvm_mapped),
             (&mut self.collective_goal_unmapped, &o.collective_goal_unmapped),
             (&mut self.cnn1d, &o.cnn1d),
+            (&mut self.paired_collective, &o.paired_collective),
+            (&mut self.paired_consensus, &o.paired_consensus),
             (&mut self.close_pair.ego, &o.close_pair.ego),
             (&mut self.close_pair.collective, &o.close_pair.collective),
             (&mut self.close_pair.consensus, &o.close_pair.consensus),
@@ -139,6 +152,9 @@ impl Tallies {
             }
         }
         self.decided_ticks += o.decided_ticks;
+        self.voted_undecided_ticks += o.voted_undecided_ticks;
+        self.lone_stranger_robot_ticks += o.lone_stranger_robot_ticks;
+        self.doubted_only_robot_ticks += o.doubted_only_robot_ticks;
         self.agreement += o.agreement;
         self.ticks += o.ticks;
         self.frames += o.frames;
@@ -326,8 +342,11 @@ fn heads_for_farther(at: [f32; 2], goal: Station, pairs: &[(Station, Station)], 
 /// What one tick left for scoring once the future truth is known.
 struct TickRecord {
     per_robot: Vec<(usize, Predictions)>,
-    /// Each live robot's team decision (class per step; empty if no votes or none made).
-    decisions: Vec<Vec<Station>>,
+    /// Each live robot's team decision (class per step; empty if no votes or none
+    /// made), by slot.
+    decisions: Vec<(usize, Vec<Station>)>,
+    /// Some robot voted for the tick.
+    voted: bool,
     /// The worker heads for the farther station of a close pair.
     farther: bool,
     phase: Phase,
@@ -354,7 +373,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let n = o.robots;
     let ticks = o.ticks as usize;
     let horizon = o.models.manifest.horizon;
-    let mut world = World::new(layout.clone(), o.scenario, episode_seed, n);
+    let mut world = World::with_workers(layout.clone(), o.scenario, episode_seed, n, o.workers);
     let spots = Station::ALL.map(|k| layout.station(k).work_spot);
     let pairs = layout.close_pairs();
     let in_close_pair = Station::ALL.map(|k| pairs.iter().any(|&(a, b)| a == k || b == k));
@@ -392,8 +411,8 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
 
     for step in 0..ticks + horizon {
         world.step();
-        ticks_on_goal = if intents.last().is_some_and(|&g| g != world.worker.goal) { 0 } else { ticks_on_goal + 1 };
-        intents.push(world.worker.goal);
+        ticks_on_goal = if intents.last().is_some_and(|&g| g != world.worker().goal) { 0 } else { ticks_on_goal + 1 };
+        intents.push(world.worker().goal);
         if step >= ticks {
             continue;
         }
@@ -401,7 +420,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         let now = TICK * tick as u32;
         // Liars vote a station the worker is not heading to, every tick.
         for slot in o.faults.liar_slots() {
-            let wrong = Station::ALL[(world.worker.goal.index() + 1) % NUM_CLASSES];
+            let wrong = Station::ALL[(world.worker().goal.index() + 1) % NUM_CLASSES];
             bus.lie(slot, Some(wrong));
         }
         if o.faults.dropouts > 0 && step == ticks / 2 {
@@ -428,6 +447,9 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                     p.position = [p.position[0] + d, p.position[1] + d];
                 }
             }
+            // The person the robot's engine will follow comes first, for the
+            // observers as for the engine (which does the same again, to no effect).
+            bus.engine(slot).floor().follow(&mut frame);
             obs.see(&frame);
             bus.deliver(slot, Input::Frame(frame), now);
             tallies.frames += 1;
@@ -464,6 +486,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
         tallies.messages += messages;
         tallies.bytes += bytes as u64;
+        let voted = votes.iter().any(Option::is_some);
         let mut per_robot = Vec::with_capacity(n);
         let mut decisions = Vec::with_capacity(n);
         for (slot, obs) in observers.iter_mut().enumerate() {
@@ -480,16 +503,16 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             per_robot.push((slot, p));
             // A liar's own decisions are not the team's to score.
             if !o.faults.liar_slots().contains(&slot) {
-                decisions.push(decided[slot].take().unwrap_or_default());
+                decisions.push((slot, decided[slot].take().unwrap_or_default()));
             }
         }
-        let farther = heads_for_farther(world.worker.position, world.worker.goal, &pairs, &spots);
-        let phase = Phase::of(world.worker.phase == WorkerPhase::Stationary, ticks_on_goal);
+        let farther = heads_for_farther(world.worker().position, world.worker().goal, &pairs, &spots);
+        let phase = Phase::of(world.worker().phase == WorkerPhase::Stationary, ticks_on_goal);
         let route = (phase == Phase::Later).then(|| {
-            let (at, goal) = (world.worker.position, world.worker.goal);
+            let (at, goal) = (world.worker().position, world.worker().goal);
             Route::of(at, goal, &spots, route_bends(at, spots[goal.index()], layout, o.scenario.obstacles()))
         });
-        records.push(TickRecord { per_robot, decisions, farther, phase, route });
+        records.push(TickRecord { per_robot, decisions, voted, farther, phase, route });
     }
 
     // Score now that the truth of every horizon is known.
@@ -554,19 +577,28 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                 }
             }
         }
+        // The robot-ticks with both a collective's prediction and a team decision.
+        for (slot, p) in &rec.per_robot {
+            let decision = rec.decisions.iter().find(|(s, _)| s == slot).map(|(_, d)| d);
+            if let (Some(c), Some(d)) = (&p.collective, decision.filter(|d| !d.is_empty())) {
+                tallies.paired_collective.add(c, truth);
+                tallies.paired_consensus.add(d, truth);
+            }
+        }
         tallies.ticks += 1;
-        for d in &rec.decisions {
+        for (_, d) in &rec.decisions {
             // A robot that decided nothing for the tick is wrong at every step.
             tallies.team_all_ticks.add_or_miss(d, truth);
             if close {
                 tallies.close_pair.team_all_ticks.add_or_miss(d, truth);
             }
         }
-        let decided: Vec<&Vec<Station>> = rec.decisions.iter().filter(|d| !d.is_empty()).collect();
+        let decided: Vec<&Vec<Station>> = rec.decisions.iter().map(|(_, d)| d).filter(|d| !d.is_empty()).collect();
+        tallies.voted_undecided_ticks += u64::from(decided.is_empty() && rec.voted);
         if !decided.is_empty() {
             tallies.decided_ticks += 1;
             // A live robot that decided nothing disagrees.
-            tallies.agreement.tick(rec.decisions.iter().map(|d| d.first()));
+            tallies.agreement.tick(rec.decisions.iter().map(|(_, d)| d.first()));
             for d in decided {
                 tallies.consensus.add(d, truth);
                 if t >= SETTLED_TICKS {
@@ -577,6 +609,11 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
                 }
             }
         }
+    }
+    for slot in (0..n).filter(|&s| bus.is_live(s)) {
+        let m = bus.engine(slot).metrics();
+        tallies.lone_stranger_robot_ticks += m.lone_stranger_ticks;
+        tallies.doubted_only_robot_ticks += m.doubted_only_ticks;
     }
     Ok(tallies)
 }

@@ -116,6 +116,8 @@ impl Faults {
 
 pub struct EvalOptions {
     pub scenario: Scenario,
+    /// Workers on the floor (the first is scored).
+    pub workers: usize,
     pub robots: usize,
     pub models: Arc<ModelSet>,
     /// Episode e runs on floor e mod floors.len().
@@ -188,6 +190,12 @@ pub struct Report {
     /// Share of ticks on which the team had a decision (some robot saw the worker or,
     /// with a relation set, still tracked it).
     pub coverage: f64,
+    /// Share of ticks on which some robot voted but the team decided no class; and the
+    /// share of robot-ticks its lone-voter rule, and its doubt of every voter, left
+    /// without a class (the engines' own counts).
+    pub voted_undecided: f64,
+    pub lone_stranger: f64,
+    pub doubted_only: f64,
     /// Messages each robot published per tick (embedding, vote, relayed ballots,
     /// decision), and their bytes as the codec writes them.
     pub messages_per_robot_tick: f64,
@@ -306,6 +314,8 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     models.insert(Scored::Cvm, of(&|e| &e.cvm));
     models.insert(Scored::CvmMapped, of(&|e| &e.cvm_mapped));
     models.insert(Scored::CollectiveGoalUnmapped, of(&|e| &e.collective_goal_unmapped));
+    models.insert(Scored::CollectivePaired, of(&|e| &e.paired_collective));
+    models.insert(Scored::ConsensusPaired, of(&|e| &e.paired_consensus));
     if o.cnn1d && m.models.cnn1d.is_some() {
         models.insert(Scored::Cnn1d, of(&|e| &e.cnn1d));
     }
@@ -369,6 +379,9 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         per_robot,
         agreement: all.agreement.share(),
         coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
+        voted_undecided: all.voted_undecided_ticks as f64 / all.ticks.max(1) as f64,
+        lone_stranger: all.lone_stranger_robot_ticks as f64 / (all.ticks * o.robots as u64).max(1) as f64,
+        doubted_only: all.doubted_only_robot_ticks as f64 / (all.ticks * o.robots as u64).max(1) as f64,
         messages_per_robot_tick: all.messages as f64 / all.frames.max(1) as f64,
         bytes_per_robot_tick: all.bytes as f64 / all.frames.max(1) as f64,
         confusion: BTreeMap::from([(Scored::Ego, all.confusion_ego), (Scored::Collective, all.confusion_collective)]),
@@ -487,7 +500,9 @@ pub fn print(r: &Report) {
         _ => "–".into(),
     };
     println!("  {:<15} {:>21} {:>21}   (95 % CI by episode)", "model", "at t %", "t+1..H %");
-    for name in Scored::LISTED.into_iter().chain([Scored::ConsensusSettled, Scored::CollectiveGoalUnmapped]) {
+    let extra =
+        [Scored::ConsensusSettled, Scored::CollectiveGoalUnmapped, Scored::CollectivePaired, Scored::ConsensusPaired];
+    for name in Scored::LISTED.into_iter().chain(extra) {
         if let Some(a) = r.models.get(&name) {
             println!("  {:<15} {:>21} {:>21}", name, ci(a), ci_future(a));
         }
@@ -550,6 +565,12 @@ pub fn print(r: &Report) {
         r.seconds,
         r.per_frame_us
     );
+    println!(
+        "  without a class though someone voted: {:.1}% of ticks (left so by the lone-voter rule {:.1}%, every voter doubted {:.1}% of robot-ticks)",
+        100.0 * r.voted_undecided,
+        100.0 * r.lone_stranger,
+        100.0 * r.doubted_only
+    );
 }
 
 #[cfg(test)]
@@ -565,6 +586,7 @@ mod tests {
     fn options(models: Arc<ModelSet>, faults: Faults) -> EvalOptions {
         EvalOptions {
             scenario: Scenario::Dynamic,
+            workers: 1,
             robots: 3,
             models,
             floors: vec![NamedLayout { name: "test".into(), layout: spwi_world::layout::Layout::default_layout() }],
@@ -599,6 +621,18 @@ mod tests {
             assert!((0.0..=1.0).contains(&acc.t), "{key}: {acc:?}");
         }
         assert_eq!(a.per_robot.len(), 3);
+    }
+
+    #[test]
+    fn the_paired_figures_score_the_collective_and_the_consensus_on_the_same_robot_ticks() {
+        let episodes = run_episodes(&options(fixture(), Faults::none())).unwrap();
+        let total: u64 = episodes.iter().map(|e| e.paired_collective.samples()).sum();
+        assert!(total > 0, "some robot predicted and decided");
+        for e in &episodes {
+            assert_eq!(e.paired_collective.samples(), e.paired_consensus.samples(), "the same robot-ticks");
+            assert!(e.paired_collective.samples() <= e.collective.samples());
+            assert!(e.paired_consensus.samples() <= e.consensus.samples());
+        }
     }
 
     #[test]

@@ -93,7 +93,7 @@ impl Observers {
     /// constant-velocity model's track.
     pub fn see(&mut self, frame: &DetectionFrame) {
         let t = frame.tick();
-        self.keypoints = frame.human.as_ref().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
+        self.keypoints = frame.worker().map(|h| normalise_keypoints(&h.keypoints, frame.image_size));
         self.facing = (self.row_layout == RowLayout::RelationsFacing).then(|| self.camera.facing_in(frame)).flatten();
         if self.cnn1d.is_some() {
             if let Some(g) = self.graph.build(frame, None) {
@@ -104,7 +104,7 @@ impl Observers {
             }
             self.cnn_rows = self.cnn_rows.split_off(&t.saturating_sub(self.window as u64 - 1));
         }
-        if let (Some(h), Some(pose)) = (&frame.human, &frame.pose) {
+        if let (Some(h), Some(pose)) = (frame.worker(), &frame.pose) {
             if let Some((z, _)) = self.camera.back_project(pose, (h.keypoints[0], h.keypoints[1]), HEAD_HEIGHT) {
                 self.cvm.observe(t, z);
             }

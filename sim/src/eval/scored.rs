@@ -29,6 +29,10 @@ pub enum Scored {
     CvmMapped,
     /// The paper's 1D-CNN + GRU baseline.
     Cnn1d,
+    /// The collective GRU on the robot-ticks on which its robot also decided a class.
+    CollectivePaired,
+    /// The team's decision on those same robot-ticks.
+    ConsensusPaired,
     /// The collective on the close pair's farther station (its recall).
     CollectiveFarther,
     /// The CVM likewise.
@@ -63,6 +67,8 @@ impl Scored {
             Scored::Cvm => "cvm",
             Scored::CvmMapped => "cvm_mapped",
             Scored::Cnn1d => "cnn1d",
+            Scored::CollectivePaired => "collective_paired",
+            Scored::ConsensusPaired => "consensus_paired",
             Scored::CollectiveFarther => "collective_farther",
             Scored::CvmFarther => "cvm_farther",
         }

@@ -177,6 +177,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
      -> Result<Report> {
         let r = run(&EvalOptions {
             scenario,
+            workers: 1,
             robots,
             models: models.clone(),
             floors: s.floors.clone(),
@@ -278,6 +279,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
                       seed: u64| {
         let r = run(&EvalOptions {
             scenario: Scenario::Dynamic,
+            workers: 1,
             robots,
             models: models.clone(),
             floors,

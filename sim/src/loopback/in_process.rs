@@ -72,6 +72,11 @@ impl InProcessAgent {
         Ok(InProcessAgent { robot, started, shutdown, task })
     }
 
+    /// Whether the daemon has ended (it may leave on its own: revoked, or on an error).
+    pub fn finished(&self) -> bool {
+        self.task.is_finished()
+    }
+
     /// Leaves the fleet cleanly (token undeclared, session closed) and returns what the
     /// daemon returned.
     pub async fn stop(self) -> Result<()> {

@@ -3,6 +3,7 @@
 
 mod clock;
 mod deciding;
+mod history;
 mod rounds;
 mod stale;
 mod tracks_and_maps;
@@ -54,12 +55,16 @@ pub(crate) fn frame(robot: &str, tick: u64, seen: bool) -> DetectionFrame {
         capture_us: DetectionFrame::capture_at_tick(tick),
         pose: None,
         image_size: [640.0, 480.0],
-        human: seen.then(|| HumanDetection {
-            bbox: BBox { x: 300.0, y: 200.0, w: 40.0, h: 120.0 },
-            // A live detector: the keypoints move a little every frame.
-            keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32 + (seed * 7.0).sin()).collect(),
-            feature: feat(1.0),
-        }),
+        humans: seen
+            .then(|| HumanDetection {
+                bbox: BBox { x: 300.0, y: 200.0, w: 40.0, h: 120.0 },
+                // A live detector: the keypoints move a little every frame.
+                keypoints: (0..KEYPOINT_VALUES).map(|i| 300.0 + i as f32 + (seed * 7.0).sin()).collect(),
+                feature: feat(1.0),
+                track: None,
+            })
+            .into_iter()
+            .collect(),
         objects: (0..3)
             .map(|k| ObjectDetection {
                 class: ObjectClass::ALL[k],

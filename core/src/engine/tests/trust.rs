@@ -222,6 +222,7 @@ fn a_liar_beside_one_honest_voter_is_outweighed_by_what_we_check_and_judged_in_h
     assert_eq!((voters, class), (vec![id("b"), id("d")], Some(Station::Assembly)));
     // d alone, while b (trusted as much, not established either) is live: no class.
     assert_eq!(tick(&mut a, 2, false, true), Some((vec![], None)), "an unjudged voter decides no tick alone");
+    assert_eq!(a.metrics.lone_stranger_ticks, 1, "and /metrics counts the tick left so");
     for t in 3..=60 {
         tick(&mut a, t, true, true);
     }

@@ -1,0 +1,190 @@
+//! A newcomer learns whom the team trusts from its peers' recent lessons.
+//!
+//! Trust is learned from the votes of decided ticks ([`crate::trust`], `decide.rs`). A
+//! robot that joins, or restarts, has learned nothing: it trusts every member alike,
+//! and the rule that a voter not yet established never decides a tick alone while a
+//! trusted member is live then sets aside the very voters its peers count. Measured on
+//! the container fleet, the three fresh robots of six decided "no class" where the
+//! other three decided a station on 7 % of the ticks after they joined. So a robot
+//! that has just started asks its peers for the team's history (a [`HistoryMsg`] of
+//! one lesson without votes, whose tick is the first it decided: "what came before
+//! this?"), and a few of them ([`EngineConfig::relayers`], ranked by a hash of the
+//! asker's id, the same few on every robot) send the lessons they learned over the
+//! [`MAX_HISTORY_TICKS`] ticks before it, if they have any: robots that started
+//! together have none to send each other. The newcomer learns them, in tick order and
+//! before its own, from a fresh book: it judges the same signed votes its peers judged.
+//!
+//! The newcomer asks, rather than its peers sending whenever a member appears: on a
+//! lossy network members drop out and come back every few seconds, and a history of
+//! up to 256 kB pushed to each of them every time would fill the links the votes need.
+//! A robot asks only in its first seconds, at most [`HISTORY_ASKS`] times a second
+//! apart, until a history comes; a peer answers one asker at most once a second.
+//!
+//! What a history can cost and do: it is taken only from a live member, only for ticks
+//! within [`MAX_HISTORY_TICKS`] of now and before the first tick the receiver decided
+//! itself, so a robot that has run longer takes none and nothing it decided is learned
+//! twice. It never speaks for its sender: the sender's own votes are dropped, so no
+//! member can make itself trusted by rewriting its past; in a secured fleet the daemon
+//! also drops every vote whose origin's signature does not verify. What a sender can do
+//! is leave votes out; the votes of several senders' histories are joined.
+//!
+//! [`EngineConfig::relayers`]: super::EngineConfig::relayers
+
+use super::decide::VotesHeld;
+use super::rounds::relay_rank;
+use super::{Engine, Output};
+use crate::hash::Fnv1a;
+use crate::hindsight::Hindsight;
+use crate::trust::TrustBook;
+use spwi_proto::*;
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// How many times a new robot asks for the team's history.
+pub const HISTORY_ASKS: u32 = 3;
+/// For how many ticks after its first decision a robot still asks.
+pub const ASKING_TICKS: u64 = 30;
+/// How long a robot waits before asking again, or before answering one asker again.
+const RESEND: Duration = Duration::from_secs(1);
+
+/// Where a robot stands with histories: asked for its own, answered others'.
+#[derive(Debug, Default)]
+pub(super) struct HistoryState {
+    asks: u32,
+    last_ask: Option<Duration>,
+    /// A live member's history taught us something: no more asking.
+    taught: bool,
+    /// When we last answered each asker (the last second's only).
+    answered: BTreeMap<RobotId, Duration>,
+}
+
+impl Engine {
+    /// Keeps a lesson just learned for newcomers: the latest [`MAX_HISTORY_TICKS`] ticks.
+    pub(super) fn keep_learned(&mut self, tick: u64, votes: VotesHeld) {
+        if !votes.is_empty() {
+            self.learned.insert(tick, votes);
+        }
+        self.forget_oldest_lessons();
+    }
+
+    fn forget_oldest_lessons(&mut self) {
+        while self.learned.len() > MAX_HISTORY_TICKS {
+            self.learned.pop_first();
+        }
+    }
+
+    /// Asks for the team's history while we are new (decided nothing yet, or for less
+    /// than [`ASKING_TICKS`]), have peers, were taught nothing, asked fewer than
+    /// [`HISTORY_ASKS`] times, and not within the last second.
+    pub(super) fn ask_for_history(&mut self, now: Duration, out: &mut Vec<Output>) {
+        let new = self.first_decided.is_none_or(|t| tick_at(now) < t + ASKING_TICKS);
+        let due = self.history.last_ask.is_none_or(|at| now >= at + RESEND);
+        if !new || self.history.taught || self.live.is_empty() || self.history.asks >= HISTORY_ASKS || !due {
+            return;
+        }
+        self.history.asks += 1;
+        self.history.last_ask = Some(now);
+        self.metrics.histories_asked += 1;
+        let (robot, instance) = (self.cfg.robot.clone(), self.cfg.instance);
+        let before = Lesson { tick: self.taught_before(now), votes: Vec::new() };
+        out.push(Output::History(HistoryMsg { robot, instance, lessons: vec![before] }));
+    }
+
+    /// The ticks a history can teach us lie before this one: the first we decided, or
+    /// the oldest we could still decide.
+    fn taught_before(&self, now: Duration) -> u64 {
+        self.first_decided.unwrap_or_else(|| self.cfg.window.oldest(now))
+    }
+
+    /// A member asked for the team's history before tick `before`: if we are among the
+    /// peers that tell it, and did not within the last second, our lessons of the
+    /// [`MAX_HISTORY_TICKS`] ticks before it go out (nothing when we learned none).
+    fn answer_history(&mut self, asker: &RobotId, before: u64, now: Duration, out: &mut Vec<Output>) {
+        let from = before.saturating_sub(MAX_HISTORY_TICKS as u64);
+        if self.learned.range(from..before).next().is_none() || !self.tells_history_to(asker) {
+            return;
+        }
+        if self.history.answered.get(asker).is_some_and(|&at| now < at + RESEND) {
+            return;
+        }
+        self.history.answered.retain(|_, at| now < *at + RESEND);
+        self.history.answered.insert(asker.clone(), now);
+        let mut lessons: Vec<Lesson> = self
+            .learned
+            .range(from..before)
+            .map(|(&tick, votes)| Lesson { tick, votes: votes.values().cloned().collect() })
+            .collect();
+        let (robot, instance) = (self.cfg.robot.clone(), self.cfg.instance);
+        loop {
+            let h = HistoryMsg { robot: robot.clone(), instance, lessons };
+            // A large fleet's ten seconds may not fit one message: the oldest go first.
+            if encode(&h).len() <= MAX_MESSAGE_BYTES || h.lessons.len() <= 1 {
+                self.metrics.histories_sent += 1;
+                out.push(Output::History(h));
+                return;
+            }
+            lessons = h.lessons;
+            lessons.drain(..lessons.len().div_ceil(4));
+        }
+    }
+
+    /// Whether we rank among the [`super::EngineConfig::relayers`] live members (the
+    /// newcomer aside) first by a hash of the newcomer's id and theirs.
+    fn tells_history_to(&self, newcomer: &RobotId) -> bool {
+        let mut fnv = Fnv1a::default();
+        fnv.eat(newcomer.as_str().as_bytes());
+        let key = fnv.0;
+        let mine = (relay_rank(key, &self.cfg.robot), &self.cfg.robot);
+        let ahead = self.live.iter().filter(|r| *r != newcomer && (relay_rank(key, r), *r) < mine).count();
+        ahead < self.cfg.relayers
+    }
+
+    /// A peer's history: one lesson without votes asks for ours; otherwise the votes of
+    /// others for ticks we never decided, within reach, join what we learned, and we
+    /// learn it all again from a fresh book.
+    pub(super) fn on_history(&mut self, h: HistoryMsg, now: Duration, out: &mut Vec<Output>) {
+        if h.robot == self.cfg.robot || !self.live.contains(&h.robot) {
+            self.metrics.histories_ignored += 1;
+            return;
+        }
+        if let [ask] = &h.lessons[..] {
+            if ask.votes.is_empty() {
+                self.answer_history(&h.robot, ask.tick, now, out);
+                return;
+            }
+        }
+        let now_tick = tick_at(now);
+        let oldest = now_tick.saturating_sub(MAX_HISTORY_TICKS as u64);
+        let before = self.taught_before(now);
+        let mut taken = 0;
+        for lesson in h.lessons.into_iter().filter(|l| (oldest..before).contains(&l.tick)) {
+            let held = self.learned.entry(lesson.tick).or_default();
+            for v in lesson.votes.into_iter().filter(|v| v.robot != h.robot) {
+                if let std::collections::btree_map::Entry::Vacant(slot) = held.entry(v.robot.clone()) {
+                    slot.insert(v);
+                    taken += 1;
+                }
+            }
+        }
+        self.learned.retain(|_, votes| !votes.is_empty());
+        self.forget_oldest_lessons();
+        if taken == 0 {
+            self.metrics.histories_ignored += 1;
+            return;
+        }
+        self.history.taught = true;
+        self.metrics.history_votes_learned += taken;
+        self.relearn();
+    }
+
+    /// Forgets what we learned and learns every kept lesson again, in tick order.
+    fn relearn(&mut self) {
+        self.trust = TrustBook::new(self.cfg.trust);
+        self.hindsight = Hindsight::default();
+        let learned = std::mem::take(&mut self.learned);
+        for votes in learned.values() {
+            self.learn(votes);
+        }
+        self.learned = learned;
+    }
+}
