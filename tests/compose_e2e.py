@@ -264,6 +264,7 @@ def roster_changes():
     revoked = sts[victim]["robot"]
     version = sts[operator]["roster_version"]
     rest = [ip for c, (_, ip) in ag.items() if c != victim]
+    left_before = {ip: sts[c]["metrics"]["members_left"] for c, (_, ip) in ag.items() if c != victim}
     fleet_dir = "/var/lib/spwi/fleet"
     sh("docker", "exec", operator, "spwi-agent", "fleet", "revoke", "--robot", revoked, "--dir", fleet_dir)
     _, took = wait_until(f"the other 3 dropping the revoked {revoked}", all_count(rest, 3), 10, poll=0.05)
@@ -278,6 +279,13 @@ def roster_changes():
     if "revoked" not in said:
         fail(f"{revoked}'s agent left without saying it was revoked: {said[-500:]}")
     keeps_deciding(rest, 3)
+    time.sleep(3.0)  # every reopen over, and a held member's grace
+    for ip in rest:
+        s = must_status(ip)
+        gone = s["metrics"]["members_left"] - left_before[ip]
+        if gone != 1:
+            fail(f"{s['robot']} saw {gone} members leave while only {revoked} was revoked "
+                 f"(a peer reopening its session taken for gone)")
 
     newcomer = "robot-17"
     sh("docker", "exec", operator, "spwi-agent", "fleet", "add", "--robot", newcomer, "--dir", fleet_dir)

@@ -69,7 +69,7 @@ impl From<&DecodeError> for DropReason {
 /// Registers every counter and histogram of the engine, as they stand, in `registry` (the
 /// scrape's own: see [`exposition`]); `members` is the live member count.
 pub fn register_engine(m: &Metrics, registry: &mut Registry, members: usize) {
-    let counters: [(&str, &str, u64); 27] = [
+    let counters: [(&str, &str, u64); 29] = [
         ("spwi_frames", "detection frames processed", m.frames),
         ("spwi_frames_with_worker", "frames in which the worker was seen", m.frames_with_worker),
         ("spwi_decisions", "team decisions published", m.decisions),
@@ -121,6 +121,8 @@ pub fn register_engine(m: &Metrics, registry: &mut Registry, members: usize) {
             m.histories_ignored,
         ),
         ("spwi_history_votes_learned", "votes of others learned from peers' histories", m.history_votes_learned),
+        ("spwi_members_joined", "robots that became members", m.members_joined),
+        ("spwi_members_left", "members that left (revoked, gone, or not back within a reopen's grace)", m.members_left),
     ];
     for (name, help, v) in counters {
         registry.register(name, help, ConstCounter::new(v));

@@ -144,6 +144,10 @@ pub struct Metrics {
     pub histories_ignored: u64,
     /// Votes of others learned from peers' histories.
     pub history_votes_learned: u64,
+    /// Robots that became members, and members that left (a member that flaps in and
+    /// out shows here first).
+    pub members_joined: u64,
+    pub members_left: u64,
     pub stages: BTreeMap<Stage, Histogram>,
 }
 

@@ -147,6 +147,21 @@ fn decided_on(collector: &Decisions, robots: &[RobotId], from: u64, to: u64) {
     }
 }
 
+/// Checks that every decision of `robots` heard since `since` counted `members` live
+/// members: while the members reopen their sessions with the new roster's rules
+/// (their links drop for a moment), none of them is taken for gone.
+fn counted_throughout(collector: &Decisions, robots: &[RobotId], since: Instant, members: u32) {
+    let seen: Vec<_> = collector.all().into_iter().filter(|d| d.at >= since && robots.contains(&d.msg.robot)).collect();
+    assert!(seen.len() > 20, "only {} decisions heard since the members changed", seen.len());
+    for d in seen {
+        assert_eq!(
+            d.msg.live_members, members,
+            "{} decided tick {} with {} live members",
+            d.msg.robot, d.msg.tick, d.msg.live_members
+        );
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_robot_admitted_while_the_fleet_runs_is_counted_by_every_robot() {
     let _serial = serial().await;
@@ -168,6 +183,7 @@ async fn a_robot_admitted_while_the_fleet_runs_is_counted_by_every_robot() {
         let refs: Vec<_> = agents.iter().collect();
         let took = members_become(&refs, |m| m.contains(&r4) && m.len() == 4, "every robot to count r4").await;
         eprintln!("r4 counted by every robot {:.2} s after it started", took.as_secs_f64());
+        let counted = Instant::now();
         for a in &agents[..3] {
             let s = a.started.status.lock().unwrap().clone();
             assert_eq!(s.roster_version, Some(version), "{} holds roster version {:?}", a.robot, s.roster_version);
@@ -181,6 +197,11 @@ async fn a_robot_admitted_while_the_fleet_runs_is_counted_by_every_robot() {
         tokio::time::sleep(Duration::from_secs(2)).await;
         let to = publisher.current_tick() - 2;
         decided_on(&collector, &veterans, from, to);
+        counted_throughout(&collector, &all, counted, 4);
+        for a in &agents[..3] {
+            let m = a.started.status.lock().unwrap().metrics.clone();
+            assert_eq!((m.members_joined, m.members_left), (3, 0), "{}: members joined and left", a.robot);
+        }
         for a in agents {
             a.stop().await.unwrap();
         }
@@ -204,6 +225,7 @@ async fn a_robot_revoked_while_the_fleet_runs_is_cut_off() {
         let r2 = agents.remove(1);
         let took = members_become(&[&agents[0], &agents[1]], |m| !m.contains(&id("r2")), "r2 to be no member").await;
         eprintln!("r2 no member of r1 and r3 {:.2} s after the roster was said", took.as_secs_f64());
+        let dropped = Instant::now();
         // Nobody speaks to it any more: the publisher's and the peers' rules deny it.
         let cut = members_become(&[&r2], |m| m.len() == 1, "r2 to be alone").await;
         eprintln!("r2 counts no one else {:.2} s later", cut.as_secs_f64());
@@ -230,8 +252,18 @@ async fn a_robot_revoked_while_the_fleet_runs_is_cut_off() {
         }
         let honest = [id("r1"), id("r3")];
         for d in collector.all().iter().filter(|d| d.at >= since && honest.contains(&d.msg.robot)) {
-            assert_eq!(d.msg.live_members, 2, "{} counted r2 at tick {}", d.msg.robot, d.msg.tick);
             assert!(!d.msg.voters.contains(&id("r2")), "{} counted r2's vote at tick {}", d.msg.robot, d.msg.tick);
+        }
+        // Nor r2 (revoked), nor one another while r1 and r3 reopened their sessions.
+        counted_throughout(&collector, &honest, dropped, 2);
+        for a in &agents {
+            let m = a.started.status.lock().unwrap().metrics.clone();
+            assert_eq!(
+                (m.members_joined, m.members_left),
+                (2, 1),
+                "{}: members joined and left (only r2 left)",
+                a.robot
+            );
         }
         for a in &agents {
             let s = a.started.status.lock().unwrap().clone();

@@ -12,10 +12,11 @@
 //!
 //! In a secured fleet the daemon takes a newer signed roster while it runs
 //! ([`crate::fleet::live`]): from then on a revoked robot's messages are refused and it
-//! is no longer a member, a new robot's signed votes count, and shortly after (spread
-//! over 1.5 s by robot) the session is reopened with the new roster's access rules,
-//! which Zenoh sets only when a session opens. A roster that revokes this robot makes
-//! it leave the fleet.
+//! is no longer a member, a new robot's signed votes count, and shortly after (0.2 s,
+//! then spread over 1.5 s by robot) the session is reopened with the new roster's
+//! access rules, which Zenoh sets only when a session opens. Members seen to leave
+//! in those seconds are held a moment, as they are most likely reopening too
+//! ([`departures`]). A roster that revokes this robot makes it leave the fleet.
 //!
 //! Start-up refuses to join a fleet where a live daemon already holds our robot id
 //! (Zenoh would merge the two liveliness tokens into one member); a clash that happens
@@ -23,6 +24,7 @@
 //! reported in logs, `/status` and `/metrics`.
 
 mod connection;
+mod departures;
 pub(crate) mod log;
 pub mod memory;
 mod publishing;
@@ -34,6 +36,7 @@ use crate::record::{PeerState, RecordedConfig, Recorder};
 use crate::status::{Health, RecentDecision, SharedStatus, Status};
 use anyhow::Result;
 use connection::{Connection, Joining, Membership, Message};
+use departures::Departures;
 use log::RateLimitedLog;
 use publishing::Outbox;
 use spwi_core::clock::FleetClock;
@@ -162,6 +165,7 @@ pub async fn run(
     let mut reopen_at: Option<tokio::time::Instant> = None;
     // Inputs the daemon makes itself (a revoked robot leaving), handled before the next wait.
     let mut pending: VecDeque<Input> = VecDeque::new();
+    let mut departures = Departures::default();
     // In a secured fleet, robots the roster held admits (and this one, whatever its
     // certificate): anyone else's messages are refused even before the session is
     // reopened with the roster's access rules.
@@ -180,8 +184,25 @@ pub async fn run(
                 if !admitted(&roster, &r) {
                     continue; // a revoked robot still running, until its links go
                 }
-                tracing::info!(robot = %r, alive, "membership change");
-                Wake::Input(if alive { Input::MemberJoined(r) } else { Input::MemberLeft(r) })
+                if alive {
+                    if !departures.joined(&r) {
+                        tracing::info!(robot = %r, alive, "membership change");
+                    }
+                    Wake::Input(Input::MemberJoined(r))
+                } else if departures.left(&r, Instant::now()) {
+                    tracing::info!(robot = %r, alive, "membership change");
+                    Wake::Input(Input::MemberLeft(r))
+                } else {
+                    tracing::debug!(robot = %r, "token withdrawn during a roster change: held while it reopens");
+                    continue;
+                }
+            }
+            _ = sleep_until(departures.next_due().map(tokio::time::Instant::from_std)) => {
+                for r in departures.due(Instant::now()) {
+                    tracing::info!(robot = %r, alive = false, "membership change (did not come back)");
+                    pending.push_back(Input::MemberLeft(r));
+                }
+                continue;
             }
             adopted = live::adopted(roster.as_mut(), &conn.session) => match adopted {
                 Ok(adopted) => Wake::Roster(adopted),
@@ -220,6 +241,7 @@ pub async fn run(
                 }
                 pending.extend(revoked.into_iter().filter(|r| *r != robot).map(Input::MemberLeft));
                 reopen_at = Some(tokio::time::Instant::now() + live::reopen_delay(&robot));
+                departures.roster_adopted(Instant::now());
                 if let (Ok(mut s), Some(w)) = (status.lock(), &roster) {
                     s.roster_version = Some(credentials.roster.version);
                     s.roster_adopted_at = Some(crate::fleet::authority::rfc3339(w.roster.adopted_at.into()));
@@ -237,6 +259,7 @@ pub async fn run(
                 conn = Connection::reopen(secured_config, &fleet, &robot, queue).await?;
                 outbox = Outbox::start(&conn.session, &fleet, &robot).await?;
                 watch.listen(&conn.session).await?;
+                departures.reopened(engine.members().into_iter().filter(|m| *m != robot), Instant::now());
                 let held = &watch.roster;
                 tracing::info!(
                     took_ms = began.elapsed().as_millis() as u64,

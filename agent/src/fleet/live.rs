@@ -279,12 +279,13 @@ pub async fn adopted(watch: Option<&mut Watch>, session: &zenoh::Session) -> Res
     }
 }
 
-/// How long after adopting a roster a process reopens its session: spread over 1.5 s
-/// by a hash of its name, so that the members of a fleet, told at once, do not all
-/// drop their links in the same moment.
+/// How long after adopting a roster a process reopens its session: 0.2 s (so that the
+/// members it told have adopted the roster too, and hold its departure as a reopen)
+/// and up to 1.5 s more by a hash of its name, so that the members of a fleet, told at
+/// once, do not all drop their links in the same moment.
 pub fn reopen_delay(name: &RobotId) -> Duration {
     let h = name.as_str().bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3));
-    Duration::from_millis(h % 1500)
+    Duration::from_millis(200 + h % 1500)
 }
 
 fn stamp(creds: &Credentials) -> Option<(SystemTime, u64)> {
@@ -395,8 +396,9 @@ mod tests {
     }
 
     #[test]
-    fn reopening_is_spread_over_a_second_and_a_half_by_name() {
+    fn reopening_waits_a_moment_then_is_spread_over_a_second_and_a_half_by_name() {
         let delays: BTreeSet<_> = (0..20).map(|i| reopen_delay(&RobotId::new(format!("r{i}")).unwrap())).collect();
-        assert!(delays.len() > 15 && delays.iter().all(|d| *d < Duration::from_millis(1500)), "{delays:?}");
+        let within = |d: &Duration| (Duration::from_millis(200)..Duration::from_millis(1700)).contains(d);
+        assert!(delays.len() > 15 && delays.iter().all(within), "{delays:?}");
     }
 }

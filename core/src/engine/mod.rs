@@ -294,6 +294,7 @@ impl Engine {
                 // A robot that joins has mapped nothing yet: we tell it what we have.
                 // (What it learned it asks for itself, as do we while we are new.)
                 if r != self.cfg.robot && self.live.insert(r.clone()) {
+                    self.metrics.members_joined += 1;
                     let stations = self.floor.team_map.own_stations();
                     if stations.iter().any(Option::is_some) {
                         let (robot, instance) = (self.cfg.robot.clone(), self.cfg.instance);
@@ -303,7 +304,9 @@ impl Engine {
                 }
             }
             Input::MemberLeft(r) => {
-                self.live.remove(&r);
+                if self.live.remove(&r) {
+                    self.metrics.members_left += 1;
+                }
                 self.active.remove(&r);
                 self.instances.remove(&r);
                 self.peer_clocks.remove(&r);
