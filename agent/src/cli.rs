@@ -52,6 +52,10 @@ pub struct Args {
     /// Model set folder (overrides models.dir).
     #[arg(long)]
     pub models: Option<PathBuf>,
+    /// The factory's floor plan: where its stations stand (overrides floor.plan;
+    /// `spwi-sim layout --plan` writes one from a layout).
+    #[arg(long, value_name = "FILE", env = "SPWI_FLOOR_PLAN")]
+    pub floor_plan: Option<PathBuf>,
     /// Record every input and output of the decision engine to this MCAP file.
     #[arg(long, value_name = "FILE")]
     pub record: Option<PathBuf>,
@@ -159,6 +163,9 @@ async fn run(args: Args) -> Result<()> {
     }
     if let Some(m) = args.models {
         config.models.dir = Some(m);
+    }
+    if let Some(p) = args.floor_plan {
+        config.floor.plan = Some(p);
     }
     init_tracing(config.log.format);
     config.validate()?;

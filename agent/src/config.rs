@@ -5,7 +5,7 @@
 
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
-use spwi_core::floor::CameraCalibration;
+use spwi_core::floor::{CameraCalibration, FloorPlan};
 use spwi_core::model::Backend;
 pub use spwi_core::settings::{ConsensusRule, TickConfig};
 use std::net::SocketAddr;
@@ -20,6 +20,25 @@ pub struct AgentConfig {
     pub models: ModelsConfig,
     pub http: HttpConfig,
     pub log: LogConfig,
+    pub floor: FloorConfig,
+}
+
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FloorConfig {
+    /// The factory's floor plan (TOML, `spwi_core::floor::plan`): where its stations
+    /// stand, seeding the station map; none to map them from detections alone.
+    pub plan: Option<PathBuf>,
+}
+
+impl FloorConfig {
+    /// Reads the floor plan named, if any; the error names the file and what is wrong.
+    pub fn load_plan(&self) -> Result<Option<FloorPlan>> {
+        let Some(path) = &self.plan else { return Ok(None) };
+        let text = std::fs::read_to_string(path).with_context(|| format!("floor plan {}", path.display()))?;
+        let plan = FloorPlan::parse(&text).map_err(|e| anyhow::anyhow!("floor plan {}: {e}", path.display()))?;
+        Ok(Some(plan))
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -162,6 +181,26 @@ mod tests {
         // A setting this build does not know is refused, naming it.
         let e = toml::from_str::<AgentConfig>("[tick]\nembedding_wait_ms = 30\n").unwrap_err().to_string();
         assert!(e.contains("unknown field `embedding_wait_ms`"), "{e}");
+    }
+
+    #[test]
+    fn a_floor_plan_is_read_and_a_bad_one_named() {
+        let dir = std::env::temp_dir().join(format!("spwi-plan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("plan.toml");
+        std::fs::write(&good, "[stations.storage]\nposition = [1.0, 2.0]\nuncertainty_m = 0.5\n").unwrap();
+        let cfg: AgentConfig = toml::from_str(&format!("[floor]\nplan = {:?}\n", good.display().to_string())).unwrap();
+        assert_eq!(cfg.floor.load_plan().unwrap().map(|p| p.len()), Some(1));
+        assert_eq!(AgentConfig::default().floor.load_plan().unwrap(), None, "no plan: detections alone");
+
+        let missing = FloorConfig { plan: Some(dir.join("nowhere.toml")) };
+        let e = format!("{:#}", missing.load_plan().unwrap_err());
+        assert!(e.contains("nowhere.toml"), "{e}");
+        let bad = dir.join("bad.toml");
+        std::fs::write(&bad, "[stations.kitchen]\nposition = [1.0, 2.0]\nuncertainty_m = 0.5\n").unwrap();
+        let e = FloorConfig { plan: Some(bad) }.load_plan().unwrap_err().to_string();
+        assert!(e.contains("bad.toml") && e.contains("stations.kitchen"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

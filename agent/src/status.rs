@@ -81,6 +81,18 @@ pub struct Status {
     pub clocks: BTreeMap<RobotId, PeerClock>,
     /// Whether frames come in and ticks get decided (`/healthz`).
     pub health: Health,
+    /// The floor plan this robot was given, if any, and what its cameras say of it.
+    pub floor_plan: Option<FloorPlanStatus>,
+}
+
+/// The floor plan as the robot's team map stands against it.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct FloorPlanStatus {
+    /// How many stations the plan places.
+    pub stations: usize,
+    /// The planned stations the team map puts elsewhere (a work spot or objects seen
+    /// well away from the plan's place): the plan or a camera's calibration is wrong.
+    pub contradicted: Vec<&'static str>,
 }
 
 /// Frames come in but no tick gets decided: the robot is of no use to its team, and an
@@ -157,6 +169,9 @@ impl Status {
         self.metrics = engine.metrics().clone();
         self.transport = transport.clone();
         self.clocks = engine.peer_clocks().clone();
+        if let Some(plan) = self.floor_plan.as_mut() {
+            plan.contradicted = engine.floor().team_map.contradicts().into_iter().map(|k| k.name()).collect();
+        }
     }
 
     /// Appends new decisions, forgetting the oldest beyond [`RECENT_DECISIONS`].

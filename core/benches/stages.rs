@@ -122,6 +122,7 @@ fn bench_backend(backend: Backend) {
             ask_rounds: 2,
             stale_after: 0, // the bench repeats one frame on purpose
             window: Default::default(),
+            floor_plan: None,
         },
         set.inference(TemporalModel::Collective).unwrap(),
     );

@@ -11,6 +11,7 @@
 //! render.rs     `spwi-sim render`: a top-down PNG and each camera's detections
 //! stats.rs      `spwi-sim stats`: how hard the task is, per scenario
 //! faulty_camera.rs cameras that lie: frozen on one frame, or looping an old clip
+//! floor_plan.rs a layout's floor plan, exact or displaced
 //! bench.rs      `spwi-sim bench`: N agent processes over Zenoh; latency, CPU, memory
 //! soak.rs       `spwi-sim bench --soak`: the same fleet for long, robots leaving and freezing
 //! loopback/     a fleet on one machine (hub, agents in-process or as processes, their
@@ -36,6 +37,7 @@ pub mod durations;
 pub mod episodes;
 pub mod eval;
 pub mod faulty_camera;
+pub mod floor_plan;
 pub mod layout;
 pub mod loopback;
 pub mod measures;

@@ -73,7 +73,11 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         let ids = vec![id("h0"), id("h1")];
         let mut config = AgentConfig::default();
         config.http.listen = Some("127.0.0.1:0".parse().unwrap());
+        let plan = std::env::temp_dir().join(format!("spwi-status-plan-{}.toml", std::process::id()));
+        std::fs::write(&plan, "[stations.storage]\nposition = [1.0, 2.0]\nuncertainty_m = 0.5\n").unwrap();
+        config.floor.plan = Some(plan.clone());
         let a = InProcessAgent::start(&hub, &ids[0], &models, config).await.unwrap();
+        std::fs::remove_file(&plan).unwrap();
         let b = InProcessAgent::start(&hub, &ids[1], &models, AgentConfig::default()).await.unwrap();
         let _publisher = Publisher::start(&hub, ids.clone(), Duration::from_millis(100));
         collector.wait_members(&ids, 2, Instant::now(), Duration::from_secs(5)).await.unwrap();
@@ -103,6 +107,8 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         assert_eq!(status["stale_peers"], serde_json::json!([]));
         assert_eq!(status["consensus"], "trust");
         assert!(status["roster_version"].is_null(), "an open fleet holds no roster");
+        assert_eq!(status["floor_plan"]["stations"], 1, "the plan it was given");
+        assert!(status["floor_plan"]["contradicted"].is_array(), "{}", status["floor_plan"]);
         let trust = status["trust"].as_object().expect("trust per voter");
         assert!(!trust.is_empty() && trust.keys().all(|r| r == "h0" || r == "h1"), "{trust:?}");
         assert!(trust.values().all(|t| (0.0..=1.0).contains(&t.as_f64().unwrap())), "{trust:?}");
@@ -117,6 +123,8 @@ async fn status_metrics_and_health_are_served_while_deciding() {
             "spwi_feed_stale{robot=\"h0\"} 0",
             "spwi_decided_on_fewer_ballots_total{robot=\"h0\"}",
             "spwi_trust{robot=\"h0\",peer=\"h1\"}",
+            "spwi_members_joined_total{robot=\"h0\"} 1",
+            "spwi_members_left_total{robot=\"h0\"} 0",
         ] {
             assert!(body.contains(needle), "/metrics lacks {needle}:\n{body}");
         }

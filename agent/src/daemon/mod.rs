@@ -33,7 +33,7 @@ use crate::config::AgentConfig;
 use crate::fleet::live::{self, Adopted, Watch};
 use crate::metrics::{DropReason, TransportCounters};
 use crate::record::{PeerState, RecordedConfig, Recorder};
-use crate::status::{Health, RecentDecision, SharedStatus, Status};
+use crate::status::{FloorPlanStatus, Health, RecentDecision, SharedStatus, Status};
 use anyhow::Result;
 use connection::{Connection, Joining, Membership, Message};
 use departures::Departures;
@@ -91,7 +91,8 @@ pub async fn run(
     config.validate()?;
     let instance = random_instance();
     let m = &models.manifest;
-    let engine_config = EngineConfig::new(robot.clone(), instance, &config.tick, &config.camera, m);
+    let mut engine_config = EngineConfig::new(robot.clone(), instance, &config.tick, &config.camera, m);
+    engine_config.floor_plan = config.floor.load_plan()?;
     let mut recorder = match &record {
         Some(path) => Some(Recorder::create(
             path,
@@ -135,6 +136,11 @@ pub async fn run(
         transport: TransportCounters::default(),
         clocks: Default::default(),
         health: health.clone(),
+        floor_plan: engine
+            .config()
+            .floor_plan
+            .as_ref()
+            .map(|p| FloorPlanStatus { stations: p.len(), ..Default::default() }),
     }));
     let mut http_task = None;
     let mut http_addr = None;

@@ -4,7 +4,7 @@
 
 use crate::clock::TickWindow;
 use crate::consensus::{Rule, Weights};
-use crate::floor::CameraCalibration;
+use crate::floor::{CameraCalibration, FloorPlan};
 use crate::settings::{ConsensusRule, TickConfig};
 use crate::temporal::TemporalModel;
 use crate::trust::TrustConfig;
@@ -49,6 +49,10 @@ pub struct EngineConfig {
     pub stale_after: u32,
     /// The ticks around `now` a frame or a peer's message may be for.
     pub window: TickWindow,
+    /// Where the factory's plan puts the stations, seeding the station maps (`None`:
+    /// mapped from detections alone).
+    #[serde(default)]
+    pub floor_plan: Option<FloorPlan>,
 }
 
 impl EngineConfig {
@@ -88,6 +92,7 @@ impl EngineConfig {
             ask_rounds: tick.ask_rounds,
             stale_after: tick.stale_after_frames,
             window: TickWindow { past: tick.accept_past_ticks, ahead: tick.accept_ahead_ticks },
+            floor_plan: None,
         }
     }
 }

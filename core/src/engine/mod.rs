@@ -164,7 +164,8 @@ impl Engine {
         let window = Window::with_frames(m.window, m.frames(), m.row).with_peer_slots(inference.peer_slots());
         let row_layout = m.row;
         let temperature = inference.set().temperature(cfg.temporal);
-        let floor = FloorView::new(cfg.camera.clone());
+        let mut floor = FloorView::new(cfg.camera.clone());
+        floor.plan(cfg.floor_plan.as_ref());
         let trust = TrustBook::new(cfg.trust);
         Engine {
             cfg,
@@ -228,6 +229,7 @@ impl Engine {
     pub fn adopt_maps(&mut self, own: StationMap, team: StationMap) {
         self.floor.own_map = own;
         self.floor.team_map = team;
+        self.floor.plan(self.cfg.floor_plan.as_ref());
     }
 
     /// Our own feed repeats itself: we set it aside until it changes.

@@ -18,12 +18,14 @@
 
 pub mod calibration;
 pub mod people;
+pub mod plan;
 pub mod relations;
 pub mod stations;
 pub mod track;
 
 pub use calibration::CameraCalibration;
 pub use people::{People, Seen};
+pub use plan::{FloorPlan, PlannedStation};
 pub use relations::{facing, fuse_facings, peer_set, relations, FACING_DIM, RELATION_DIM};
 pub use stations::StationMap;
 pub use track::{agrees_with_most, fuse, held_at, sightings, team_worker, Sighting, TeamWorker, Track};
@@ -62,6 +64,14 @@ impl FloorView {
             followed: None,
             own_map: StationMap::default(),
             team_map: StationMap::default(),
+        }
+    }
+
+    /// Seeds both station maps with a floor plan, if there is one.
+    pub fn plan(&mut self, plan: Option<&FloorPlan>) {
+        if let Some(p) = plan {
+            self.own_map.plan(p);
+            self.team_map.plan(p);
         }
     }
 

@@ -24,7 +24,13 @@
 //! it where their maps put each station ([`MapMsg`](spwi_proto::MapMsg)), and its team
 //! map [`borrow`](StationMap::borrow)s those positions for the stations it has not
 //! mapped itself, until it has.
+//!
+//! A floor plan ([`super::plan`]) given to the daemon seeds the map: a planned station
+//! stands where the plan puts it until the robots have watched the worker at work
+//! there, and the plan's stations count as places the worker may be at work at, so
+//! a plan that is a little off is corrected by where the worker actually stands.
 
+use super::plan::{FloorPlan, PlannedStation};
 use spwi_proto::{Landmark, Station, WorkerEstimate, NUM_CLASSES};
 use std::collections::VecDeque;
 
@@ -54,6 +60,13 @@ const AMBIGUOUS_M: f32 = 1.0;
 const SPOT_SIGMA_M: f32 = 0.5;
 /// Worker positions at a station before they stand for it instead of its objects.
 pub const SPOT_SAMPLES: u32 = 5;
+/// How far a station's objects' centre may lie from where the worker stands to work
+/// (m): a planned position at least this certain stands for the station before its
+/// objects' centre does.
+const OBJECTS_OFF_M: f32 = 1.0;
+/// A learned work spot further than this (m, plus twice the plan's uncertainty) from
+/// the plan's position contradicts the plan.
+const SPOT_OFF_M: f32 = 0.5;
 
 #[derive(Debug, Clone, PartialEq)]
 struct Cluster {
@@ -118,6 +131,8 @@ pub struct StationMap {
     borrowed: [WorkSpot; NUM_CLASSES],
     /// Whether the worker, while tracked well, stands still.
     dwell: Dwell,
+    /// Where the floor plan puts each station, if one was given.
+    planned: [Option<PlannedStation>; NUM_CLASSES],
 }
 
 /// The worker's last [`DWELL_TICKS`] positions: whether it stands still, as it does at
@@ -198,7 +213,8 @@ impl StationMap {
         };
         let Some(still) = self.dwell.observe(w.position) else { return };
         let counted = self.clusters.iter().filter(|c| c.counts).map(|c| (c.mean(), c.station));
-        if let Some(station) = at_one_station(still, counted) {
+        let planned = Station::ALL.into_iter().filter_map(|k| Some((self.planned[k.index()]?.position, k)));
+        if let Some(station) = at_one_station(still, counted.chain(planned)) {
             self.spots[station.index()].add(w.position);
         }
     }
@@ -208,18 +224,50 @@ impl StationMap {
         Station::ALL.map(|s| self.station(s))
     }
 
-    /// Where the worker stands to work at `station`, if it was seen there long enough,
-    /// else the centre of the station's objects, if they are on the map, else where
-    /// peers' maps put it, if they sent one.
+    /// Where the worker stands to work at `station`, if it was seen there long enough;
+    /// else where the floor plan puts it, if the plan is surer than the objects; else
+    /// the centre of the station's objects, if they are on the map; else where the plan
+    /// puts it; else where peers' maps put it, if they sent one.
     pub fn station(&self, station: Station) -> Option<[f32; 2]> {
-        self.placed(station).or_else(|| self.borrowed[station.index()].mean(1))
+        let k = station.index();
+        let planned = self.planned[k];
+        let sure = planned.filter(|p| p.uncertainty_m <= OBJECTS_OFF_M);
+        (self.spots[k].mean(SPOT_SAMPLES))
+            .or(sure.map(|p| p.position))
+            .or_else(|| self.objects_centre(station))
+            .or(planned.map(|p| p.position))
+            .or_else(|| self.borrowed[k].mean(1))
     }
 
     /// Where this map places `station` from its own sightings: the worker's work spot
-    /// if seen long enough, else its objects' centre.
+    /// if seen long enough (at its objects, or at the plan's place), else its objects'
+    /// centre.
     fn placed(&self, station: Station) -> Option<[f32; 2]> {
-        let objects = self.objects_centre(station)?;
-        Some(self.spots[station.index()].mean(SPOT_SAMPLES).unwrap_or(objects))
+        self.spots[station.index()].mean(SPOT_SAMPLES).or_else(|| self.objects_centre(station))
+    }
+
+    /// Seeds the map with a floor plan.
+    pub fn plan(&mut self, plan: &FloorPlan) {
+        self.planned = plan.stations;
+    }
+
+    /// The planned stations the robot's own sightings put elsewhere: a work spot
+    /// further than [`SPOT_OFF_M`], or objects' centre further than the reach of a
+    /// worker at work ([`AT_OBJECTS_M`]), from the plan's position, beyond twice its
+    /// uncertainty.
+    pub fn contradicts(&self) -> Vec<Station> {
+        Station::ALL
+            .into_iter()
+            .filter(|&k| {
+                let Some(p) = self.planned[k.index()] else { return false };
+                let slack = 2.0 * p.uncertainty_m;
+                match (self.spots[k.index()].mean(SPOT_SAMPLES), self.objects_centre(k)) {
+                    (Some(spot), _) => dist(spot, p.position) > SPOT_OFF_M + slack,
+                    (None, Some(objects)) => dist(objects, p.position) > AT_OBJECTS_M + slack,
+                    (None, None) => false,
+                }
+            })
+            .collect()
     }
 
     /// A peer's map: its positions stand for the stations this map has not placed
@@ -357,6 +405,58 @@ mod tests {
             m.add(&lm(Storage, 1.5, 2.0), t);
         }
         assert!(dist(m.station(Storage).unwrap(), [1.5, 2.0]) < 1e-3, "its own sightings take over");
+    }
+
+    fn planned(stations: &[(Station, [f32; 2], f32)]) -> FloorPlan {
+        let mut plan = FloorPlan::default();
+        for &(k, position, uncertainty_m) in stations {
+            plan.stations[k.index()] = Some(PlannedStation { position, uncertainty_m });
+        }
+        plan
+    }
+
+    /// The worker stands still at `at` for a second and a half.
+    fn works_at(m: &mut StationMap, at: [f32; 2]) {
+        for t in 0..15 {
+            let jitter = if t % 2 == 0 { 0.05 } else { -0.05 };
+            m.observe_worker(Some(&worker(at[0] + jitter, at[1], 0.02)));
+        }
+    }
+
+    #[test]
+    fn a_planned_station_stands_where_the_plan_puts_it_until_the_worker_is_seen_there() {
+        let mut m = close_pair();
+        m.plan(&planned(&[
+            (Storage, [3.0, 3.0], 1.0),
+            (Assembly, [10.0, 10.0], 0.5),
+            (Manufacturing, [12.5, 11.0], 2.0),
+        ]));
+        assert_eq!(m.station(Storage), Some([3.0, 3.0]), "never seen: the plan's place");
+        assert_eq!(m.station(Assembly), Some([10.0, 10.0]), "a plan surer than the objects' centre wins");
+        assert!(dist(m.station(Manufacturing).unwrap(), [12.5, 11.5]) < 1e-3, "an unsure plan yields to the objects");
+        assert_eq!(m.own_stations()[0], None, "a planned station is not passed on");
+        m.borrow(&[Some([8.0, 8.0]), None, None, None]);
+        assert_eq!(m.station(Storage), Some([3.0, 3.0]), "the plan before a peer's word");
+        // The plan put storage 0.8 m off where the worker works at it: the map learns.
+        works_at(&mut m, [3.8, 3.0]);
+        assert!(dist(m.station(Storage).unwrap(), [3.8, 3.0]) < 0.05, "{:?}", m.station(Storage));
+        assert!(dist(m.own_stations()[0].unwrap(), [3.8, 3.0]) < 0.05, "a spot seen is passed on");
+        assert!(m.contradicts().is_empty(), "{:?}", m.contradicts());
+    }
+
+    #[test]
+    fn a_plan_the_cameras_contradict_is_named() {
+        let mut m = close_pair(); // assembly's objects at (10, 11), manufacturing's at (12.5, 11.5)
+        m.plan(&planned(&[
+            (Assembly, [10.0, 4.0], 0.5),
+            (Manufacturing, [13.0, 12.0], 0.5),
+            (Storage, [1.0, 1.0], 0.5),
+        ]));
+        assert_eq!(m.contradicts(), vec![Assembly], "objects 7 m from the plan; the others agree or are unseen");
+        let mut m = close_pair();
+        m.plan(&planned(&[(Manufacturing, [12.5, 11.0], 0.3)]));
+        works_at(&mut m, [12.5, 12.6]); // works 1.6 m from the plan, 1.1 m from the machine
+        assert_eq!(m.contradicts(), vec![Manufacturing], "the work spot seen is not the plan's");
     }
 
     #[test]

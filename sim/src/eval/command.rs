@@ -60,6 +60,13 @@ pub struct EvalArgs {
     /// every episode starts with empty maps, a fleet's first seconds on a new floor).
     #[arg(long, value_name = "SECONDS", default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=3600))]
     pub warm_map: u32,
+    /// Give every robot a floor plan: `truth`, the floor's own stations (the only one
+    /// the generated floors have).
+    #[arg(long, value_name = "truth", value_parser = ["truth"])]
+    pub floor_plan: Option<String>,
+    /// With --floor-plan: each station of the plan displaced by up to this many metres.
+    #[arg(long, value_name = "METRES", default_value_t = 0.0, requires = "floor_plan")]
+    pub plan_error: f32,
     /// Mean delay of a message between robots, ms (default: loopback-like, 0.5 ms).
     #[arg(long, default_value_t = 0.0)]
     pub delay: f64,
@@ -102,6 +109,8 @@ pub fn main(a: EvalArgs) -> Result<()> {
         pose_error,
         clock_offset,
         warm_map,
+        floor_plan,
+        plan_error,
         delay,
         agent_config,
         json,
@@ -120,6 +129,12 @@ pub fn main(a: EvalArgs) -> Result<()> {
     }
     if !(0.0..=100.0).contains(&pose_error) {
         anyhow::bail!("--pose-error {pose_error}: metres, 0 to 100");
+    }
+    if !(0.0..=20.0).contains(&plan_error) {
+        anyhow::bail!("--plan-error {plan_error}: metres, 0 to 20");
+    }
+    if all && floor_plan.is_some() {
+        anyhow::bail!("--all --floor-plan: the results page's studies map the floors from detections alone");
     }
     if clock_offset.unsigned_abs() > 400 {
         anyhow::bail!("--clock-offset {clock_offset}: ms, within ±400 (the robots take ticks 5 back, 2 ahead)");
@@ -208,6 +223,7 @@ pub fn main(a: EvalArgs) -> Result<()> {
         },
         tick,
         warm_map_ticks: warm_map * spwi_proto::TICKS_PER_SECOND,
+        plan_error_m: floor_plan.map(|_| plan_error),
         cnn1d: true,
     })?;
     crate::eval::print(&report);

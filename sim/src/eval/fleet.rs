@@ -14,6 +14,7 @@ use crate::faulty_camera::{LoopingCamera, StuckCamera};
 use crate::measures::Agreement;
 use anyhow::Result;
 use spwi_core::engine::{Engine, EngineConfig, Input, Output};
+use spwi_core::floor::FloorPlan;
 use spwi_core::temporal::TemporalModel;
 use spwi_core::vote;
 use spwi_proto::{RobotId, Station, WorkerPhase, NUM_CLASSES};
@@ -355,10 +356,12 @@ struct TickRecord {
 }
 
 /// The daemon's own engine, with the evaluation's `[tick]` settings, for robot `slot`.
-fn engine(slot: usize, o: &EvalOptions, layout: &Layout) -> Result<Engine> {
+/// With `--floor-plan`, the floor's plan (one for the whole fleet, as a factory has).
+fn engine(slot: usize, o: &EvalOptions, layout: &Layout, plan: Option<&FloorPlan>) -> Result<Engine> {
     let id = RobotId::new(format!("r{slot}"))?;
     let camera = crate::calibration::of(&layout.camera);
-    let cfg = EngineConfig::new(id, slot as u64 + 1, &o.tick, &camera, &o.models.manifest);
+    let mut cfg = EngineConfig::new(id, slot as u64 + 1, &o.tick, &camera, &o.models.manifest);
+    cfg.floor_plan = plan.cloned();
     Ok(Engine::new(cfg, o.models.inference(TemporalModel::Collective)?))
 }
 
@@ -377,7 +380,8 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let spots = Station::ALL.map(|k| layout.station(k).work_spot);
     let pairs = layout.close_pairs();
     let in_close_pair = Station::ALL.map(|k| pairs.iter().any(|&(a, b)| a == k || b == k));
-    let mut engines = (0..n).map(|slot| engine(slot, o, layout)).collect::<Result<Vec<_>>>()?;
+    let plan = o.plan_error_m.map(|e| crate::floor_plan::of_layout(layout, e, episode_seed));
+    let mut engines = (0..n).map(|slot| engine(slot, o, layout, plan.as_ref())).collect::<Result<Vec<_>>>()?;
     if o.warm_map_ticks > 0 {
         let seed = crate::team_floor::warm_up_seed(episode_seed);
         let warm = crate::team_floor::TeamFloor::warmed(layout, o.scenario, seed, n, o.warm_map_ticks)?;

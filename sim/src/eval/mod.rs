@@ -135,6 +135,9 @@ pub struct EvalOptions {
     /// Ticks the fleet worked on the floor before each episode, building its station
     /// maps (0: they start empty). See `team_floor`.
     pub warm_map_ticks: u32,
+    /// Give each robot the floor's plan, each station displaced by up to this many
+    /// metres (`None`: no plan, the stations mapped from detections alone).
+    pub plan_error_m: Option<f32>,
     /// Score the 1D-CNN baseline too (when the set ships one). `--all` asks for it only
     /// in the tables that show it: elsewhere it was a quarter of the run's time.
     pub cnn1d: bool,
@@ -170,6 +173,8 @@ pub struct Report {
     pub tick: TickConfig,
     /// Seconds the fleet worked on each floor before an episode (its maps warm).
     pub warm_map_s: f64,
+    /// The robots had the floor's plan, each station up to this far off (m).
+    pub floor_plan_error_m: Option<f32>,
     /// gnn (t only), ego, collective, consensus (collective votes + consensus, on the
     /// ticks some robot decided), team_all_ticks (the same decision over every tick, no
     /// decision counting as wrong), cvm, cnn1d. Each model is scored on the ticks where
@@ -372,6 +377,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         faults: o.faults.clone(),
         tick: o.tick.clone(),
         warm_map_s: f64::from(o.warm_map_ticks) / f64::from(spwi_proto::TICKS_PER_SECOND),
+        floor_plan_error_m: o.plan_error_m,
         models,
         close_pair,
         by_phase,
@@ -478,6 +484,9 @@ pub fn print(r: &Report) {
         r.ticks_per_episode,
         r.seed
     );
+    if let Some(e) = r.floor_plan_error_m {
+        println!("floor plan: every robot had the floor's plan, each station up to {e} m off");
+    }
     if r.warm_map_s > 0.0 {
         println!("station maps warm: the fleet worked {} s on each floor before each episode", r.warm_map_s);
     }
@@ -597,6 +606,7 @@ mod tests {
             faults,
             tick: TickConfig::default(),
             warm_map_ticks: 0,
+            plan_error_m: None,
             cnn1d: true,
         }
     }
@@ -658,6 +668,24 @@ mod tests {
         assert!(assembly.mapped > 0.5, "{assembly:?}");
         assert!(assembly.mean_error_m.unwrap() < 1.5 && assembly.far == Some(0.0), "{assembly:?}");
         assert!(r.map.iter().all(|p| (0.0..=1.0).contains(&p.mapped)), "{:?}", r.map);
+    }
+
+    #[test]
+    fn a_fleet_given_the_floor_plan_has_every_station_mapped_from_the_first_tick() {
+        let cold = run(&options(fixture(), Faults::none())).unwrap();
+        let planned = run(&EvalOptions { plan_error_m: Some(0.0), ..options(fixture(), Faults::none()) }).unwrap();
+        assert_eq!(planned.floor_plan_error_m, Some(0.0));
+        assert!(cold.map.iter().any(|p| p.mapped < 1.0), "without a plan some station is mapped late: {:?}", cold.map);
+        for p in &planned.map {
+            assert_eq!(p.mapped, 1.0, "{p:?}");
+            // A station stands where the plan puts it (its work spot) until the robots
+            // learn the spot themselves, which is where it stands too.
+            assert!(p.mean_error_m.unwrap() < 0.5, "{p:?}");
+        }
+        assert_eq!(planned.goal_unmapped_share, 0.0);
+        let off = run(&EvalOptions { plan_error_m: Some(1.0), ..options(fixture(), Faults::none()) }).unwrap();
+        assert!(off.map.iter().all(|p| p.mean_error_m.unwrap() < 1.5), "{:?}", off.map);
+        assert!(off.map.iter().any(|p| p.mean_error_m.unwrap() > 0.05), "a displaced plan shows: {:?}", off.map);
     }
 
     #[test]

@@ -188,6 +188,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
             faults,
             tick,
             warm_map_ticks: 0,
+            plan_error_m: None,
             cnn1d,
         })?;
         super::print(&r);
@@ -290,6 +291,7 @@ pub fn run_all(s: &Settings) -> Result<Studies> {
             faults: Faults::none(),
             tick: TickConfig::default(),
             warm_map_ticks: warm_s * spwi_proto::TICKS_PER_SECOND,
+            plan_error_m: None,
             cnn1d,
         })?;
         super::print(&r);

@@ -42,6 +42,7 @@ fn engine(robot: &str, set: &Arc<ModelSet>) -> Engine {
         ask_rounds: 2,
         stale_after: 5,
         window: TickWindow::default(),
+        floor_plan: None,
     };
     Engine::new(cfg, set.inference(TemporalModel::Collective).unwrap())
 }
