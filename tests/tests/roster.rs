@@ -124,12 +124,14 @@ async fn members_become(agents: &[&InProcessAgent], ok: impl Fn(&BTreeSet<RobotI
 
 /// The least share of ticks each robot decides while the roster changes. Reopening
 /// the session (Zenoh sets access rules only when a session opens) drops its links
-/// for a moment: frames and peers' messages of those ticks are lost to it (here 90.7 to
-/// 100 % of the ticks decided, a tick or a few lost per reopening).
+/// for a moment: frames and peers' messages of those ticks are lost to it (16 runs on
+/// 2026-12-07: 89.8 to 100 %, up to 5 ticks lost by the robot reopening, in a third of
+/// the runs). Every tick is decided by some robot: they reopen at different moments.
 const LEAST_DECIDED: f64 = 0.8;
 
-/// Checks that each of `robots` decided at least [`LEAST_DECIDED`] of the ticks in
-/// `from..=to` and prints what they decided, and the ticks none of them did.
+/// Checks that every tick of `from..=to` was decided by one of `robots` at least and
+/// that each of them decided at least [`LEAST_DECIDED`] of them; prints what each
+/// decided.
 fn decided_on(collector: &Decisions, robots: &[RobotId], from: u64, to: u64) {
     let by = collector.by_robot();
     let none: Vec<u64> =
@@ -142,6 +144,7 @@ fn decided_on(collector: &Decisions, robots: &[RobotId], from: u64, to: u64) {
         "ticks {from}..={to}: decided by {:?}; by none of them: {none:?}",
         robots.iter().zip(&shares).map(|(r, s)| format!("{r} {:.1} %", s * 100.0)).collect::<Vec<_>>()
     );
+    assert!(none.is_empty(), "ticks none of {robots:?} decided while the roster changed: {none:?}");
     for (r, s) in robots.iter().zip(shares) {
         assert!(s >= LEAST_DECIDED, "{r} decided {:.1} % of the ticks while the roster changed", s * 100.0);
     }
