@@ -70,6 +70,7 @@ async fn run(args: Args) -> Result<()> {
         if let Some(Ok(a)) = &adopted {
             tokio::time::sleep(live::reopen_delay(&a.credentials.identity.name)).await;
             crate::fleet::secure::apply(&mut config, &a.credentials)?;
+            live::for_reopening(&mut config)?;
         }
         session.close().await.map_err(|e| anyhow!("closing the router session: {e}"))?;
         match adopted {

@@ -127,6 +127,7 @@ pub async fn run(opts: WorldOptions, mut shutdown: watch::Receiver<bool>) -> Res
                     }
                 }
                 spwi_agent::fleet::secure::apply(&mut zenoh, &adopted.credentials)?;
+                spwi_agent::fleet::live::for_reopening(&mut zenoh)?;
                 let delay = spwi_agent::fleet::live::reopen_delay(&adopted.credentials.identity.name);
                 reopen_at = Some(tokio::time::Instant::now() + delay);
             }

@@ -124,10 +124,11 @@ async fn members_become(agents: &[&InProcessAgent], ok: impl Fn(&BTreeSet<RobotI
 
 /// The least share of ticks each robot decides while the roster changes. Reopening
 /// the session (Zenoh sets access rules only when a session opens) drops its links
-/// for a moment: frames and peers' messages of those ticks are lost to it (16 runs on
-/// 2026-12-07: 89.8 to 100 %, up to 5 ticks lost by the robot reopening, in a third of
-/// the runs). Every tick is decided by some robot: they reopen at different moments.
-const LEAST_DECIDED: f64 = 0.8;
+/// for about 10 ms: frames and peers' messages of that moment may be lost to it (100 %
+/// in each of 18 runs since reopens stopped waiting Zenoh's 500 ms scouting delay;
+/// 89.8 % in a third of the runs before); a tick or two of slack for a loaded host.
+/// Every tick is decided by some robot: they reopen at different moments.
+const LEAST_DECIDED: f64 = 0.95;
 
 /// Checks that every tick of `from..=to` was decided by one of `robots` at least and
 /// that each of them decided at least [`LEAST_DECIDED`] of them; prints what each

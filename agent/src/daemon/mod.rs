@@ -262,6 +262,7 @@ pub async fn run(
                 conn.close().await;
                 let mut secured_config = zenoh.clone();
                 crate::fleet::secure::apply(&mut secured_config, watch.credentials())?;
+                live::for_reopening(&mut secured_config)?;
                 conn = Connection::reopen(secured_config, &fleet, &robot, queue).await?;
                 outbox = Outbox::start(&conn.session, &fleet, &robot).await?;
                 watch.listen(&conn.session).await?;
