@@ -126,7 +126,7 @@ async fn members_become(agents: &[&InProcessAgent], ok: impl Fn(&BTreeSet<RobotI
 /// the session (Zenoh sets access rules only when a session opens) drops its links
 /// for about 10 ms: frames and peers' messages of that moment may be lost to it (100 %
 /// in each of 18 runs since reopens stopped waiting Zenoh's 500 ms scouting delay;
-/// 89.8 % in a third of the runs before); a tick or two of slack for a loaded host.
+/// down to 89.8 % in 7 of 16 before); a tick or two of slack for a loaded host.
 /// Every tick is decided by some robot: they reopen at different moments.
 const LEAST_DECIDED: f64 = 0.95;
 
