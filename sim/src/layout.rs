@@ -26,6 +26,9 @@ pub struct LayoutArgs {
 
 /// `spwi-sim layout`.
 pub fn main(a: LayoutArgs) -> Result<()> {
+    if matches!(a.plan, Some(Some(_))) && (a.generate.is_some() || a.mirror.is_some()) {
+        bail!("--plan FILE names the floor itself: give it no --generate or --mirror");
+    }
     let layout = match (&a.generate, &a.mirror, &a.plan) {
         (Some(seed), _, _) => generate::layout(*seed),
         (None, Some(None), _) => Layout::default_layout().mirrored(),
@@ -36,9 +39,6 @@ pub fn main(a: LayoutArgs) -> Result<()> {
     };
     layout.validate()?;
     if a.plan.is_some() {
-        if matches!(a.plan, Some(Some(_))) && (a.generate.is_some() || a.mirror.is_some()) {
-            bail!("--plan FILE names the floor itself: give it no --generate or --mirror");
-        }
         let plan = crate::floor_plan::of_layout(&layout, 0.0, 0);
         std::fs::write(&a.out, plan.to_toml()).map_err(|e| anyhow::anyhow!("--out {}: {e}", a.out.display()))?;
         println!("wrote {} (the plan of {} stations)", a.out.display(), plan.len());
