@@ -397,6 +397,13 @@ def main():
     keeps_deciding(ips, 6)
     share, ticks = agreement(ips)
     print(f"6 agents: same decision on {share:.1%} of {ticks} common ticks")
+    # What the fresh robots (the two new, the killed one restarted) did while they
+    # learned whom the team trusts: ticks withheld, votes of the team's history learned.
+    for s in (must_status(ip) for ip in ips):
+        m = s["metrics"]
+        if m["histories_asked"] > 0:
+            print(f"  {s['robot']} joined a team at work: {m['decisions_withheld']} decisions withheld, "
+                  f"{m['history_votes_learned']} votes of its history learned, catching up now: {s['catching_up']}")
     if share < 0.95:
         fail(f"agents agree on only {share:.1%} of ticks")
 

@@ -69,7 +69,7 @@ impl From<&DecodeError> for DropReason {
 /// Registers every counter and histogram of the engine, as they stand, in `registry` (the
 /// scrape's own: see [`exposition`]); `members` is the live member count.
 pub fn register_engine(m: &Metrics, registry: &mut Registry, members: usize) {
-    let counters: [(&str, &str, u64); 29] = [
+    let counters: [(&str, &str, u64); 30] = [
         ("spwi_frames", "detection frames processed", m.frames),
         ("spwi_frames_with_worker", "frames in which the worker was seen", m.frames_with_worker),
         ("spwi_decisions", "team decisions published", m.decisions),
@@ -112,6 +112,11 @@ pub fn register_engine(m: &Metrics, registry: &mut Registry, members: usize) {
             "spwi_doubted_only_ticks",
             "ticks left without a class: every voter trusted below the threshold while a trusted member was live",
             m.doubted_only_ticks,
+        ),
+        (
+            "spwi_decisions_withheld",
+            "ticks decided but not published while this robot learned the team's history",
+            m.decisions_withheld,
         ),
         ("spwi_histories_asked", "the team's history asked for while this robot was new", m.histories_asked),
         ("spwi_histories_sent", "our recent lessons sent to a member that asked for them", m.histories_sent),

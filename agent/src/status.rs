@@ -64,6 +64,9 @@ pub struct Status {
     pub recent_decisions: VecDeque<RecentDecision>,
     /// Instance ids of other live daemons that use this robot's id.
     pub duplicate_robot_id: Vec<u64>,
+    /// We joined a working team and withhold our decisions (we still vote) until we
+    /// learned whom it trusts, for at most `tick.catch_up_ms`.
+    pub catching_up: bool,
     /// Our camera repeats the same worker detection: set aside, not voting.
     pub feed_stale: bool,
     /// Peers whose feeds repeat themselves: left out of the tick until they change.
@@ -163,6 +166,7 @@ impl Status {
         self.last_decision = engine.last_decision().cloned();
         self.remember(decided);
         self.duplicate_robot_id = engine.duplicates().iter().copied().collect();
+        self.catching_up = engine.is_catching_up();
         self.feed_stale = engine.feed_is_stale();
         self.stale_peers = engine.stale_peers();
         self.trust = engine.trust();

@@ -120,6 +120,7 @@ fn bench_backend(backend: Backend) {
             relay_after: None,
             relayers: 4,
             ask_rounds: 2,
+            catch_up: Duration::ZERO,
             stale_after: 0, // the bench repeats one frame on purpose
             window: Default::default(),
             floor_plan: None,

@@ -135,6 +135,9 @@ pub struct Metrics {
     /// Ticks decided without a class although votes came: every voter was trusted
     /// below the counting threshold while a trusted member was live.
     pub doubted_only_ticks: u64,
+    /// Ticks we decided but did not publish: we were catching up with the team's
+    /// history (engine/history.rs).
+    pub decisions_withheld: u64,
     /// The team's history asked for while we were new (engine/history.rs).
     pub histories_asked: u64,
     /// Our lessons sent to members that asked.

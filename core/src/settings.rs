@@ -24,6 +24,10 @@ pub struct TickConfig {
     /// for a member's vote sends the ballots it holds, which asks the tick's relayers
     /// for the missing vote; also the most answers a robot gives a tick (0: neither).
     pub ask_rounds: u32,
+    /// How long a robot that joins a working team at most withholds its decisions
+    /// while it learns whom the team trusts (ms; 0: it decides at once). It still votes
+    /// meanwhile; see `engine/history.rs`.
+    pub catch_up_ms: u64,
     /// A camera showing, this many frames in a row, worker detections it showed before
     /// (the last frame's, or any of the last minute's) is frozen or playing back a clip:
     /// set aside until it shows new ones (0: never).
@@ -85,6 +89,7 @@ impl Default for TickConfig {
             relay_ms: 40,
             relayers: 4,
             ask_rounds: 2,
+            catch_up_ms: 1000,
             stale_after_frames: 5,
             consensus: ConsensusRule::Trust,
             alpha: None,
@@ -122,6 +127,9 @@ impl TickConfig {
         }
         if t.ask_rounds > 10 {
             bail!("tick.ask_rounds = {}: must be within 0..=10 (0: robots never ask for a missing vote)", t.ask_rounds);
+        }
+        if t.catch_up_ms > 10_000 {
+            bail!("tick.catch_up_ms = {}: must be within 0..=10000 (0: a new robot decides at once)", t.catch_up_ms);
         }
         for (name, v) in [("tick.alpha", t.alpha), ("tick.beta", t.beta)] {
             if let Some(v) = v {

@@ -129,6 +129,7 @@ pub async fn run(
         stations: crate::status::STATION_NAMES,
         recent_decisions: Default::default(),
         duplicate_robot_id: Vec::new(),
+        catching_up: false,
         feed_stale: false,
         stale_peers: Vec::new(),
         trust: Default::default(),

@@ -43,6 +43,11 @@ pub struct EngineConfig {
     /// recordings made before this field never asked).
     #[serde(default)]
     pub ask_rounds: u32,
+    /// How long a robot that joins a working team at most withholds its decisions while
+    /// it learns the team's history (`engine/history.rs`; recordings made before this
+    /// field never withheld one).
+    #[serde(default)]
+    pub catch_up: Duration,
     /// A feed showing the same worker detection this many times in a row is stale
     /// (0: never).
     #[serde(default)]
@@ -90,6 +95,7 @@ impl EngineConfig {
             relay_after: (tick.relay_ms > 0).then(|| Duration::from_millis(tick.relay_ms)),
             relayers: tick.relayers as usize,
             ask_rounds: tick.ask_rounds,
+            catch_up: Duration::from_millis(tick.catch_up_ms),
             stale_after: tick.stale_after_frames,
             window: TickWindow { past: tick.accept_past_ticks, ahead: tick.accept_ahead_ticks },
             floor_plan: None,

@@ -109,10 +109,6 @@ impl Engine {
         if let Some(arrived) = tick.own_frame {
             self.metrics.observe(Stage::FrameToDecision, now.saturating_sub(arrived));
         }
-        self.metrics.decisions += 1;
-        if by == DecidedBy::Deadline {
-            self.metrics.decisions_by_deadline += 1;
-        }
         let d = DecisionMsg {
             robot: self.cfg.robot.clone(),
             instance: self.cfg.instance,
@@ -124,12 +120,26 @@ impl Engine {
             digest,
         };
         let ours = Verdict::of(&d);
-        for theirs in std::mem::take(&mut tick.peer_verdicts).values() {
-            record_agreement(&mut self.metrics, &ours, theirs);
-        }
+        let withheld = self.catching_up(now);
+        let peer_verdicts = std::mem::take(&mut tick.peer_verdicts);
         self.settled.insert(t, tick);
         while self.settled.len() > ANSWERED_TICKS {
             self.settled.pop_first();
+        }
+        // While we catch up with the team's history, the tick is closed (its lesson
+        // learned later, late messages for it refused) but not published, nor compared.
+        if withheld {
+            self.metrics.decisions_withheld += 1;
+            self.withheld_through = Some(t);
+            self.decided.insert(t, ours);
+            return;
+        }
+        for theirs in peer_verdicts.values() {
+            record_agreement(&mut self.metrics, &ours, theirs);
+        }
+        self.metrics.decisions += 1;
+        if by == DecidedBy::Deadline {
+            self.metrics.decisions_by_deadline += 1;
         }
         self.unshared_verdict = Some(ours.clone());
         self.decided.insert(t, ours);
@@ -175,6 +185,9 @@ impl Engine {
 
     /// A peer's verdict against ours for its tick, now or when we decide it.
     pub(super) fn compare(&mut self, peer: &RobotId, theirs: Verdict) {
+        if self.withheld_through.is_some_and(|w| theirs.tick <= w) {
+            return; // we published no decision of it
+        }
         if let Some(ours) = self.decided.get(&theirs.tick) {
             record_agreement(&mut self.metrics, ours, &theirs);
         } else if let Some(tick) = self.open.get_mut(&theirs.tick) {

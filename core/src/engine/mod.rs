@@ -135,6 +135,8 @@ pub struct Engine {
     /// When we last logged a frame or message refused for its tick (rate limit).
     warned_off_clock: Option<Duration>,
     last_decision: Option<DecisionMsg>,
+    /// The latest tick we decided but withheld while catching up (`history.rs`).
+    withheld_through: Option<u64>,
     /// Our latest verdict, until our next embedding message carries it.
     unshared_verdict: Option<Verdict>,
     /// The GCN's spatial-only logits for our latest frame that showed the worker.
@@ -155,6 +157,12 @@ impl Engine {
     /// Our latest decision.
     pub fn last_decision(&self) -> Option<&DecisionMsg> {
         self.last_decision.as_ref()
+    }
+
+    /// Whether our latest decided tick was withheld: we joined a working team and are
+    /// still learning whom it trusts (`history.rs`).
+    pub fn is_catching_up(&self) -> bool {
+        self.withheld_through.is_some_and(|w| self.last_decision.as_ref().is_none_or(|d| d.tick < w))
     }
 
     /// An engine that runs `cfg` with `inference` (the model set and the GRU it runs).
@@ -197,6 +205,7 @@ impl Engine {
             peer_clocks: BTreeMap::new(),
             warned_off_clock: None,
             last_decision: None,
+            withheld_through: None,
             unshared_verdict: None,
             last_spatial: None,
         }
@@ -279,6 +288,7 @@ impl Engine {
     /// returns what to publish, in order.
     pub fn handle(&mut self, input: Input, now: Duration) -> Vec<Output> {
         let mut out = Vec::new();
+        self.note_coming(now);
         self.forget_the_past(now, &mut out);
         match input {
             Input::Frame(f) => self.on_frame(f, now, &mut out),
@@ -303,6 +313,7 @@ impl Engine {
                         out.push(Output::Map(MapMsg { robot, instance, stations }));
                     }
                     self.ask_for_history(now, &mut out);
+                    self.answer_kept_ask(&r, now, &mut out);
                 }
             }
             Input::MemberLeft(r) => {

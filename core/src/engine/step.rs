@@ -171,6 +171,9 @@ impl Engine {
         if from_peer {
             self.peer_feeds.entry(e.robot.clone()).or_default().see(e.embedding.as_deref().map(|x| x.iter().copied()));
             if let Some(theirs) = e.verdict.take() {
+                if self.live.contains(&e.robot) {
+                    self.note_peer_decided(theirs.tick);
+                }
                 self.compare(&e.robot, theirs);
             }
         }

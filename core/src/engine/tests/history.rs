@@ -29,8 +29,8 @@ fn newcomer(set: &Arc<ModelSet>, now: Duration) -> Engine {
     n
 }
 
-/// Tick `t` on which only b votes (workstation): what `e` decides.
-fn only_b_votes(e: &mut Engine, t: u64) -> (Vec<RobotId>, Option<Station>) {
+/// Tick `t` on which only b votes (workstation): what `e` publishes of it.
+fn only_b_votes_out(e: &mut Engine, t: u64) -> Vec<Output> {
     let now = ms(100 * t);
     let me = e.config().robot.as_str().to_owned();
     let mut out = e.handle(Input::Embedding(share("b", t, None, Some(one_step(Station::Workstation)), None)), now);
@@ -39,8 +39,34 @@ fn only_b_votes(e: &mut Engine, t: u64) -> (Vec<RobotId>, Option<Station>) {
     }
     out.extend(e.handle(Input::Frame(frame(&me, t, false)), now));
     out.extend(e.handle(Input::Poll, now + ms(99)));
+    out
+}
+
+/// Tick `t` on which only b votes (workstation): what `e` decides.
+fn only_b_votes(e: &mut Engine, t: u64) -> (Vec<RobotId>, Option<Station>) {
+    let out = only_b_votes_out(e, t);
     let d = decisions(&out).first().copied().cloned().expect("decided");
     (d.voters, d.steps.first().map(|s| s.class))
+}
+
+/// A newcomer that withholds its decisions for up to a second while it catches up.
+fn catching_up_engine(set: &Arc<ModelSet>) -> Engine {
+    let mut n = engine("n", set);
+    n.cfg.catch_up = Duration::from_secs(1);
+    n
+}
+
+/// Whether `e` published a decision of tick `t` (b voting alone).
+fn publishes(e: &mut Engine, t: u64) -> bool {
+    !decisions(&only_b_votes_out(e, t)).is_empty()
+}
+
+/// `e` hears a's share of tick `t`, which names a's decision of tick 30: the team was
+/// at work before a robot that came at tick 31.
+fn hears_a_team_at_work(e: &mut Engine, t: u64) {
+    let mut s = share("a", t, None, None, None);
+    s.verdict = Some(Verdict { tick: 30, class: None, voters: vec![], digest: 0 });
+    e.handle(Input::Embedding(s), ms(100 * t));
 }
 
 fn history_of(out: &[Output]) -> Option<HistoryMsg> {
@@ -95,14 +121,125 @@ fn a_newcomer_taught_the_teams_history_decides_a_lone_trusted_voters_tick_as_its
 }
 
 /// Robots that started together have nothing to teach each other: asks go unanswered.
+/// One that was deciding before the asked tick but learned nothing answers with a
+/// history of no lessons ("nothing came before").
 #[test]
-fn robots_that_started_together_answer_no_asks() {
+fn robots_that_started_together_answer_no_asks_and_one_that_learned_nothing_says_so() {
     let set = models();
     let mut a = veteran_of(1..=30, &set);
     // b asks what came before tick 1, the first it decided as a did.
-    let ask = HistoryMsg { robot: id("b"), instance: 2, lessons: vec![Lesson { tick: 1, votes: vec![] }] };
-    assert_eq!(history_of(&a.handle(Input::History(ask), ms(3100))), None);
+    let ask = |t: u64| HistoryMsg { robot: id("b"), instance: 2, lessons: vec![Lesson { tick: t, votes: vec![] }] };
+    assert_eq!(history_of(&a.handle(Input::History(ask(1)), ms(3100))), None);
     assert_eq!(a.metrics.histories_sent, 0);
+
+    // e decided ticks 1 to 30 without a vote from anyone: it learned no lesson.
+    let mut e = engine("e", &set);
+    e.handle(Input::MemberJoined(id("b")), ms(0));
+    for t in 1..=30 {
+        e.handle(abstaining("b", t), ms(100 * t));
+        e.handle(Input::Frame(frame("e", t, false)), ms(100 * t));
+    }
+    assert!(e.metrics.decisions >= 29, "{}", e.metrics.decisions);
+    let h = history_of(&e.handle(Input::History(ask(31)), ms(3100))).expect("an answer");
+    assert!(h.lessons.is_empty(), "{} lessons", h.lessons.len());
+}
+
+/// Until the team's history teaches it, a newcomer decides ticks without publishing
+/// them (it would leave a lone trusted voter's tick without a class where its peers
+/// name the station); once taught, it publishes what they do.
+#[test]
+fn a_newcomer_withholds_its_decisions_until_the_teams_history_taught_it() {
+    let set = models();
+    let mut a = veteran_of(1..=30, &set);
+    let joined = ms(3100);
+    let mut n = catching_up_engine(&set);
+    let ask = history_of(&n.handle(Input::MemberJoined(id("a")), joined)).expect("the newcomer asks");
+    for p in ["b", "c", "d"] {
+        n.handle(Input::MemberJoined(id(p)), joined);
+    }
+    a.handle(Input::MemberJoined(id("n")), joined);
+    let h = history_of(&a.handle(Input::History(ask), joined)).expect("a answers");
+
+    hears_a_team_at_work(&mut n, 32);
+    assert!(!publishes(&mut n, 32), "withheld while untaught");
+    assert!(n.is_catching_up());
+    assert_eq!((n.metrics.decisions, n.metrics.decisions_withheld), (0, 1));
+    n.handle(Input::History(h), ms(3300));
+    let out = only_b_votes_out(&mut n, 33);
+    let d = decisions(&out);
+    assert_eq!(d.len(), 1, "taught, it publishes");
+    assert_eq!((d[0].voters.clone(), d[0].steps.first().map(|s| s.class)), (vec![id("b")], Some(Station::Workstation)));
+    assert!(!n.is_catching_up());
+    assert_eq!(n.metrics.decisions, 1);
+}
+
+/// A newcomer publishes as soon as every member that tells it answered (here all
+/// four), even when they had nothing to tell.
+#[test]
+fn a_newcomer_told_nothing_came_before_by_every_teller_publishes_at_once() {
+    let set = models();
+    let joined = ms(3100);
+    let mut n = catching_up_engine(&set);
+    for p in ["a", "b", "c", "d"] {
+        n.handle(Input::MemberJoined(id(p)), joined);
+    }
+    hears_a_team_at_work(&mut n, 32);
+    let nothing = |r: &str| Input::History(HistoryMsg { robot: id(r), instance: 2, lessons: vec![] });
+    for p in ["a", "b", "c"] {
+        n.handle(nothing(p), joined);
+    }
+    assert!(!publishes(&mut n, 32), "d has not answered");
+    n.handle(nothing("d"), ms(3300));
+    assert!(publishes(&mut n, 33));
+    assert_eq!(n.metrics.histories_ignored, 0, "an answer of nothing is an answer");
+}
+
+/// No peer can keep a newcomer silent by not answering: it publishes once
+/// `catch_up` has passed since its first ask.
+#[test]
+fn a_newcomer_nobody_answers_publishes_once_its_catch_up_time_passed() {
+    let set = models();
+    let mut n = catching_up_engine(&set);
+    for p in ["a", "b", "c", "d"] {
+        n.handle(Input::MemberJoined(id(p)), ms(3100));
+    }
+    hears_a_team_at_work(&mut n, 35);
+    assert!(!publishes(&mut n, 35));
+    assert!(!publishes(&mut n, 40), "0.99 s after the ask");
+    assert!(publishes(&mut n, 42), "1.1 s after");
+    assert_eq!(n.metrics.decisions_withheld, 2);
+}
+
+/// Robots that start together have no team's history to wait for: a newcomer that
+/// hears of no decision before it came publishes its first tick, answered or not.
+#[test]
+fn robots_that_start_together_withhold_nothing() {
+    let set = models();
+    let mut n = catching_up_engine(&set);
+    for p in ["a", "b", "c", "d"] {
+        n.handle(Input::MemberJoined(id(p)), ms(3100));
+    }
+    let mut s = share("a", 32, None, None, None);
+    s.verdict = Some(Verdict { tick: 31, class: None, voters: vec![], digest: 0 });
+    n.handle(Input::Embedding(s), ms(3200));
+    assert!(publishes(&mut n, 32), "a decided tick 31, the tick n came: a started with n");
+    assert_eq!((n.metrics.decisions_withheld, n.metrics.histories_asked), (0, 1));
+}
+
+/// An ask that comes before its asker's liveliness token is kept and answered when
+/// the asker becomes a member — but not once [`super::history::ASK_KEPT`] has passed.
+#[test]
+fn an_ask_from_a_robot_not_yet_a_member_is_answered_when_it_joins() {
+    let set = models();
+    let ask = |r: &str| HistoryMsg { robot: id(r), instance: 2, lessons: vec![Lesson { tick: 31, votes: vec![] }] };
+    let mut a = veteran_of(1..=30, &set);
+    assert_eq!(history_of(&a.handle(Input::History(ask("n")), ms(3100))), None, "n is no member yet");
+    let h = history_of(&a.handle(Input::MemberJoined(id("n")), ms(3150))).expect("answered as n joins");
+    assert!(h.lessons.len() >= 25);
+
+    let mut a = veteran_of(1..=30, &set);
+    a.handle(Input::History(ask("m")), ms(3100));
+    assert_eq!(history_of(&a.handle(Input::MemberJoined(id("m")), ms(5200))), None, "kept 2 s, no longer");
 }
 
 /// The sender's own votes teach nothing (it cannot make itself trusted by rewriting

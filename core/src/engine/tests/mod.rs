@@ -40,6 +40,7 @@ fn engine(robot: &str, set: &Arc<ModelSet>) -> Engine {
         relay_after: None,
         relayers: 4,
         ask_rounds: 2,
+        catch_up: Duration::ZERO,
         stale_after: 5,
         window: TickWindow::default(),
         floor_plan: None,
