@@ -401,8 +401,8 @@ def main():
     # learned whom the team trusts: ticks withheld, votes of the team's history learned.
     for s in (must_status(ip) for ip in ips):
         m = s["metrics"]
-        if m["histories_asked"] > 0:
-            print(f"  {s['robot']} joined a team at work: {m['decisions_withheld']} decisions withheld, "
+        if m["decisions_withheld"] > 0 or m["history_votes_learned"] > 0:
+            print(f"  {s['robot']} caught up with the team: {m['decisions_withheld']} decisions withheld, "
                   f"{m['history_votes_learned']} votes of its history learned, catching up now: {s['catching_up']}")
     if share < 0.95:
         fail(f"agents agree on only {share:.1%} of ticks")

@@ -1,9 +1,9 @@
 //! Floor plans of simulated floors: where a layout's stations' work spots stand, as a
 //! factory's own plan would put them, exactly or each displaced by up to some metres
-//! (what a plan that is off costs the fleet).
+//! (what a plan that is off costs the fleet), and the layout's obstacles.
 
 use rand::Rng;
-use spwi_core::floor::{FloorPlan, PlannedStation};
+use spwi_core::floor::{FloorPlan, PlannedObstacle, PlannedStation};
 use spwi_proto::Station;
 use spwi_world::layout::Layout;
 use spwi_world::world::{stream, Stream};
@@ -15,8 +15,9 @@ pub const EXACT_UNCERTAINTY_M: f32 = 0.25;
 const PLAN_STREAM: u64 = 3;
 
 /// `layout`'s plan: every station at its work spot, each moved by up to `error_m`
-/// metres in a direction drawn from `seed` (0: the exact plan). The plan states an
-/// uncertainty of `error_m`, at least [`EXACT_UNCERTAINTY_M`].
+/// metres in a direction drawn from `seed` (0: the exact plan), and every obstacle as
+/// it stands. The plan states an uncertainty of `error_m`, at least
+/// [`EXACT_UNCERTAINTY_M`].
 pub fn of_layout(layout: &Layout, error_m: f32, seed: u64) -> FloorPlan {
     let mut rng = stream(seed, Stream::Fault(PLAN_STREAM));
     let mut plan = FloorPlan::default();
@@ -26,6 +27,7 @@ pub fn of_layout(layout: &Layout, error_m: f32, seed: u64) -> FloorPlan {
         let position = [x + off * angle.cos(), y + off * angle.sin()];
         plan.stations[k.index()] = Some(PlannedStation { position, uncertainty_m: error_m.max(EXACT_UNCERTAINTY_M) });
     }
+    plan.obstacles = layout.obstacles.iter().map(|o| PlannedObstacle { min: o.min, max: o.max }).collect();
     plan
 }
 
@@ -53,6 +55,8 @@ mod tests {
             })
             .collect();
         assert!(moved.iter().all(|&d| d <= 1.0 + 1e-5) && moved.iter().any(|&d| d > 0.1), "{moved:?}");
+        assert_eq!(exact.obstacles.len(), layout.obstacles.len());
+        assert!(!exact.obstacles.is_empty(), "the built-in floor has obstacles");
         assert_eq!(of_layout(&layout, 1.0, 1), off, "the same seed, the same plan");
         assert_ne!(of_layout(&layout, 1.0, 2), off, "another seed, another");
     }

@@ -76,7 +76,8 @@ pub(super) struct HistoryState {
     taught: bool,
     /// Members that answered our asks (with lessons or none).
     answered_us: BTreeSet<RobotId>,
-    /// The tick of our first input: when we came.
+    /// The oldest tick we could take at our first input: robots whose first decisions
+    /// come after it came with us.
     came: Option<u64>,
     /// A live member told us of a decision of a tick before we came: we joined a team
     /// at work, which has a history to learn.
@@ -180,14 +181,18 @@ impl Engine {
         !mine.iter().all(|r| self.history.answered_us.contains(*r))
     }
 
-    /// Notes the tick of our first input (when we came).
+    /// Notes when we came: the oldest tick we could take at our first input (the
+    /// oldest an ask of ours names, so the members deciding before it are the ones
+    /// that answer).
     pub(super) fn note_coming(&mut self, now: Duration) {
-        self.history.came.get_or_insert(tick_at(now));
+        if self.history.came.is_none() {
+            self.history.came = Some(self.cfg.window.oldest(now));
+        }
     }
 
     /// A live member decided tick `decided`: if that was before we came, we joined a
-    /// team at work, and catch up with it. (Robots that start together decide nothing
-    /// before each other: none of them withholds a decision.)
+    /// team at work, and catch up with it. (Robots that start within the window of
+    /// each other decide nothing before each other: none of them withholds a decision.)
     pub(super) fn note_peer_decided(&mut self, decided: u64) {
         if self.history.came.is_some_and(|came| decided < came) {
             self.history.team_at_work = true;

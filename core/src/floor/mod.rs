@@ -25,7 +25,7 @@ pub mod track;
 
 pub use calibration::CameraCalibration;
 pub use people::{People, Seen};
-pub use plan::{FloorPlan, PlannedStation};
+pub use plan::{FloorPlan, PlannedObstacle, PlannedStation};
 pub use relations::{facing, fuse_facings, peer_set, relations, FACING_DIM, RELATION_DIM};
 pub use stations::StationMap;
 pub use track::{agrees_with_most, fuse, held_at, sightings, team_worker, Sighting, TeamWorker, Track};
@@ -153,6 +153,11 @@ impl FloorView {
             Some(&(i, _, _)) => frame.humans.swap(0, i),
             None => frame.humans.clear(),
         }
+    }
+
+    /// The team's track of the worker, if it was updated at `tick`.
+    pub fn team_track(&self, tick: u64) -> Option<WorkerEstimate> {
+        self.team_track.filter(|(t, _)| *t == tick).map(|(_, e)| e)
     }
 
     /// This robot's own estimate of the worker at `tick` (what it shares).

@@ -15,9 +15,15 @@
 //! [stations.storage]
 //! position = [2.0, 3.5]     # metres
 //! uncertainty_m = 0.5       # how far off it may be (1 σ)
+//!
+//! [[obstacles]]             # optional: what the worker walks around (racks, machines)
+//! min = [4.0, 1.0]          # one corner of the rectangle (metres)
+//! max = [5.5, 6.0]          # the opposite one
 //! ```
 //!
-//! Stations it does not name are mapped from detections alone.
+//! Stations it does not name are mapped from detections alone. The robots do not
+//! use the obstacles yet; a planner reading the worker's walk does (the evaluation's
+//! planning yardstick, `sim/src/eval/planner.rs`).
 
 use spwi_proto::{Station, NUM_CLASSES};
 use std::collections::BTreeMap;
@@ -34,18 +40,34 @@ pub struct PlannedStation {
     pub uncertainty_m: f32,
 }
 
-/// Where a factory's plan puts its stations (by [`Station::index`]).
+/// The most obstacles a plan may mark.
+pub const MAX_OBSTACLES: usize = 256;
+
+/// An obstacle the plan marks: a rectangle of the floor (metres) the worker walks
+/// around.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlannedObstacle {
+    pub min: [f32; 2],
+    pub max: [f32; 2],
+}
+
+/// Where a factory's plan puts its stations (by [`Station::index`]), and the
+/// obstacles it marks.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "PlanFile", into = "PlanFile")]
 pub struct FloorPlan {
     pub stations: [Option<PlannedStation>; NUM_CLASSES],
+    pub obstacles: Vec<PlannedObstacle>,
 }
 
-/// The file's shape: stations by name.
+/// The file's shape: stations by name, then the obstacles.
 #[derive(serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct PlanFile {
     stations: BTreeMap<String, PlannedStation>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    obstacles: Vec<PlannedObstacle>,
 }
 
 impl TryFrom<PlanFile> for FloorPlan {
@@ -72,6 +94,18 @@ impl TryFrom<PlanFile> for FloorPlan {
         if plan.stations.iter().all(Option::is_none) {
             return Err("[stations] names no station".into());
         }
+        if f.obstacles.len() > MAX_OBSTACLES {
+            return Err(format!("obstacles: {} of them, at most {MAX_OBSTACLES}", f.obstacles.len()));
+        }
+        for (i, o) in f.obstacles.iter().enumerate() {
+            if !o.min.iter().chain(&o.max).all(|v| v.is_finite()) || o.min[0] >= o.max[0] || o.min[1] >= o.max[1] {
+                return Err(format!(
+                    "obstacles[{i}]: min {:?} and max {:?} are not opposite corners of a rectangle (min below max on both axes)",
+                    o.min, o.max
+                ));
+            }
+        }
+        plan.obstacles = f.obstacles;
         Ok(plan)
     }
 }
@@ -80,7 +114,7 @@ impl From<FloorPlan> for PlanFile {
     fn from(p: FloorPlan) -> PlanFile {
         let stations =
             Station::ALL.into_iter().filter_map(|k| Some((k.name().to_owned(), p.stations[k.index()]?))).collect();
-        PlanFile { stations }
+        PlanFile { stations, obstacles: p.obstacles }
     }
 }
 
@@ -121,9 +155,13 @@ mod tests {
         plan.stations[Station::Assembly.index()] = Some(PlannedStation { position: [4.5, 2.0], uncertainty_m: 0.3 });
         plan.stations[Station::Storage.index()] = Some(PlannedStation { position: [1.0, 9.25], uncertainty_m: 1.0 });
         let text = plan.to_toml();
-        assert!(text.contains("[stations.assembly]"), "{text}");
+        assert!(text.contains("[stations.assembly]") && !text.contains("obstacles"), "{text}");
         assert_eq!(FloorPlan::parse(&text).unwrap(), plan);
         assert_eq!(plan.len(), 2);
+        plan.obstacles = vec![PlannedObstacle { min: [4.0, 1.0], max: [5.5, 6.0] }];
+        let text = plan.to_toml();
+        assert!(text.contains("[[obstacles]]"), "{text}");
+        assert_eq!(FloorPlan::parse(&text).unwrap(), plan);
     }
 
     #[test]
@@ -136,6 +174,15 @@ mod tests {
             ("[stations.storage]\nposition = [1.0]\nuncertainty_m = 1.0\n", "position"),
             ("[stations.storage]\nposition = [1.0, 2.0]\nuncertainty = 1.0\n", "uncertainty"),
             ("[stations]\n", "names no station"),
+            (
+                "[stations.storage]\nposition = [1.0, 2.0]\nuncertainty_m = 1.0\n[[obstacles]]\nmin = [2.0, 1.0]\nmax = [1.0, 3.0]\n",
+                "obstacles[0]: min [2.0, 1.0] and max [1.0, 3.0]",
+            ),
+            (
+                "[stations.storage]\nposition = [1.0, 2.0]\nuncertainty_m = 1.0\n[[obstacles]]\nmin = [1.0, 1.0]\nmax = [2.0, inf]\n",
+                "obstacles[0]",
+            ),
+            ("[stations.storage]\nposition = [1.0, 2.0]\nuncertainty_m = 1.0\n[[obstacles]]\nmin = [1.0, 1.0]\n", "max"),
             ("stations = 3\n", "stations"),
         ];
         for (text, says) in bad {

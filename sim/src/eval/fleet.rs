@@ -8,6 +8,7 @@
 
 use super::bus::{Bus, Net};
 use super::observers::{Observers, Predictions};
+use super::planner::Planner;
 use super::score::{confuse, Confusion, Tally};
 use super::EvalOptions;
 use crate::faulty_camera::{LoopingCamera, StuckCamera};
@@ -55,6 +56,10 @@ pub struct Tallies {
     pub cvm: Tally,
     /// The constant-velocity model on the stations the robot's team mapped.
     pub cvm_mapped: Tally,
+    /// The planning yardstick on the team's track, with the true work spots and with
+    /// the team's map.
+    pub planner: Tally,
+    pub planner_mapped: Tally,
     /// The collective GRU on the ticks where the goal at t is missing from the robot's
     /// team map (no relation row describes it).
     pub collective_goal_unmapped: Tally,
@@ -110,6 +115,8 @@ impl Tallies {
             (&mut self.team_all_ticks, &o.team_all_ticks),
             (&mut self.cvm, &o.cvm),
             (&mut self.cvm_mapped, &o.cvm_mapped),
+            (&mut self.planner, &o.planner),
+            (&mut self.planner_mapped, &o.planner_mapped),
             (&mut self.collective_goal_unmapped, &o.collective_goal_unmapped),
             (&mut self.cnn1d, &o.cnn1d),
             (&mut self.paired_collective, &o.paired_collective),
@@ -305,13 +312,16 @@ impl Route {
 }
 
 /// Ticks of one kind (a [`Phase`], or a [`Route`] of the long walks), and how the
-/// collective, the ego and the CVM did on them.
+/// collective, the ego, the CVM and the planner did on them.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PhaseTallies {
     pub ticks: u64,
     pub collective: Tally,
     pub ego: Tally,
     pub cvm: Tally,
+    /// The planning yardstick on the true work spots, and on the team's map.
+    pub planner: Tally,
+    pub planner_mapped: Tally,
 }
 
 impl PhaseTallies {
@@ -320,13 +330,19 @@ impl PhaseTallies {
         self.collective.merge(&o.collective);
         self.ego.merge(&o.ego);
         self.cvm.merge(&o.cvm);
+        self.planner.merge(&o.planner);
+        self.planner_mapped.merge(&o.planner_mapped);
     }
 
     /// One robot's predictions of a tick of this kind.
     fn add(&mut self, p: &Predictions, truth: &[Station]) {
-        for (tally, predicted) in
-            [(&mut self.ego, &p.ego), (&mut self.collective, &p.collective), (&mut self.cvm, &p.cvm)]
-        {
+        for (tally, predicted) in [
+            (&mut self.ego, &p.ego),
+            (&mut self.collective, &p.collective),
+            (&mut self.cvm, &p.cvm),
+            (&mut self.planner, &p.planner),
+            (&mut self.planner_mapped, &p.planner_mapped),
+        ] {
             if let Some(predicted) = predicted {
                 tally.add(predicted, truth);
             }
@@ -391,7 +407,10 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     }
     let ids: Vec<RobotId> = engines.iter().map(|e| e.config().robot.clone()).collect();
     let mut observers = (0..n)
-        .map(|_| Observers::new(&o.models, crate::calibration::of(&layout.camera), o.cnn1d))
+        .map(|_| {
+            let planner = Planner::on_floor(layout, o.scenario.obstacles());
+            Observers::new(&o.models, crate::calibration::of(&layout.camera), o.cnn1d, planner)
+        })
         .collect::<Result<Vec<_>>>()?;
     let mut bus = Bus::new(engines, net(&o.faults), stream(episode_seed, Stream::Fault(1)), false);
     if o.faults.clock_offset_ms != 0 {
@@ -568,8 +587,14 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             if let Some(c) = &p.cnn1d {
                 tallies.cnn1d.add(c, truth);
             }
-            if let Some(c) = &p.cvm_mapped {
-                tallies.cvm_mapped.add(c, truth);
+            for (tally, predicted) in [
+                (&mut tallies.cvm_mapped, &p.cvm_mapped),
+                (&mut tallies.planner, &p.planner),
+                (&mut tallies.planner_mapped, &p.planner_mapped),
+            ] {
+                if let Some(c) = predicted {
+                    tally.add(c, truth);
+                }
             }
             if let Some(c) = &p.cvm {
                 tallies.cvm.add(c, truth);

@@ -27,6 +27,7 @@ mod figures;
 pub mod fleet;
 pub mod observers;
 pub mod page;
+pub mod planner;
 pub mod plots;
 pub mod reading;
 pub mod score;
@@ -233,6 +234,9 @@ pub struct PhaseAccuracy {
     pub collective: Accuracy,
     pub ego: Accuracy,
     pub cvm: Accuracy,
+    /// The planning yardstick on the true work spots, and on the team's map.
+    pub planner: Accuracy,
+    pub planner_mapped: Accuracy,
 }
 
 /// How the robots' team maps placed one station (over the scored robot-ticks).
@@ -318,6 +322,8 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
     models.insert(Scored::TeamAllTicks, of(&|e| &e.team_all_ticks));
     models.insert(Scored::Cvm, of(&|e| &e.cvm));
     models.insert(Scored::CvmMapped, of(&|e| &e.cvm_mapped));
+    models.insert(Scored::Planner, of(&|e| &e.planner));
+    models.insert(Scored::PlannerMapped, of(&|e| &e.planner_mapped));
     models.insert(Scored::CollectiveGoalUnmapped, of(&|e| &e.collective_goal_unmapped));
     models.insert(Scored::CollectivePaired, of(&|e| &e.paired_collective));
     models.insert(Scored::ConsensusPaired, of(&|e| &e.paired_consensus));
@@ -343,6 +349,8 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
             collective: of(&|e| &pick(e).collective),
             ego: of(&|e| &pick(e).ego),
             cvm: of(&|e| &pick(e).cvm),
+            planner: of(&|e| &pick(e).planner),
+            planner_mapped: of(&|e| &pick(e).planner_mapped),
         };
     let by_phase = fleet::Phase::ALL.iter().map(|&p| kind(p.name(), all.ticks, &|e| &e.by_phase[p as usize])).collect();
     let long_walk_ticks = all.long_walks.iter().map(|l| l.ticks).sum();
@@ -533,23 +541,26 @@ pub fn print(r: &Report) {
             println!("    {:<13} {:>21} {:>21}", name, ci(a), ci_future(a));
         }
     }
-    // One line per kind of tick: its share, then the collective, the ego and the CVM at t.
+    // One line per kind of tick: its share, then the collective, the ego, the CVM and the
+    // planner (on the true spots, on the team's map) at t.
     let print_kinds = |kinds: &[PhaseAccuracy]| {
         for p in kinds {
             println!(
-                "    {:<33} {:>5}% {:>21} {:>21} {:>21}",
+                "    {:<33} {:>5}% {:>21} {:>21} {:>21} {:>21} {:>21}",
                 p.phase,
                 pct(p.share),
                 ci(&p.collective),
                 ci(&p.ego),
-                ci(&p.cvm)
+                ci(&p.cvm),
+                ci(&p.planner),
+                ci(&p.planner_mapped)
             );
         }
     };
-    println!("  by phase of the worker's cycle (share of ticks · collective · ego · CVM, at t):");
+    println!("  by phase of the worker's cycle (share of ticks · collective · ego · CVM · planner · planner on the team's map, at t):");
     print_kinds(&r.by_phase);
     println!(
-        "  the long walks by what the straight line to the goal crosses (share of them · collective · ego · CVM):"
+        "  the long walks by what the straight line to the goal crosses (share of them · collective · ego · CVM · planner · planner on the team's map):"
     );
     print_kinds(&r.long_walks);
     for p in &r.per_robot {

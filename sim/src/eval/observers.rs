@@ -1,11 +1,13 @@
 //! What the evaluation runs beside each robot's engine, to compare against it: the
-//! ego-GRU (the same window rows as the engine's, without the peers' part) and the two
-//! baselines the paper compares against (the constant-velocity model and the 1D-CNN).
+//! ego-GRU (the same window rows as the engine's, without the peers' part), the two
+//! baselines the paper compares against (the constant-velocity model and the 1D-CNN)
+//! and a planning yardstick (goal inference on the team's track, `planner.rs`).
 //! They watch the robot's frames, its engine's embedding and its engine's own track
 //! and map (the ego model's relations are the robot's own, never the team's); they
 //! never feed the engine or the fleet.
 
 use super::cvm::{Cvm, HEAD_HEIGHT};
+use super::planner::Planner;
 use anyhow::Result;
 use spwi_core::floor::{CameraCalibration, FloorView};
 use spwi_core::graph::{GraphBuilder, NodeFeatures, NODE_FEATURE_DIM};
@@ -31,6 +33,11 @@ pub struct Predictions {
     pub cvm: Option<Vec<Station>>,
     /// The same model given only the stations the team mapped (what our models get).
     pub cvm_mapped: Option<Vec<Station>>,
+    /// Goal inference that plans paths around the obstacles (`planner.rs`), on the
+    /// team's track, handed the true work spots...
+    pub planner: Option<Vec<Station>>,
+    /// ... and on the stations the team mapped.
+    pub planner_mapped: Option<Vec<Station>>,
     /// Where the robot's team map put each station at this tick, as the distance from
     /// the station's true work spot (m); `None`: not on the map.
     pub map_error: [Option<f32>; NUM_CLASSES],
@@ -51,6 +58,9 @@ pub struct Observers {
     /// The 1D-CNN's rows (worker feature ‖ keypoints) by tick.
     cnn_rows: BTreeMap<u64, Vec<f32>>,
     cvm: Cvm,
+    /// The planner on the true work spots, and on the team's map.
+    planner: Planner,
+    planner_mapped: Planner,
     camera: CameraCalibration,
     row_layout: RowLayout,
     keypoints: Option<Vec<f32>>,
@@ -67,8 +77,9 @@ fn classes(logits: &[[f32; NUM_CLASSES]]) -> Vec<Station> {
 }
 
 impl Observers {
-    /// The observers of one robot; the 1D-CNN only if `cnn1d` and the set ships one.
-    pub fn new(models: &Arc<ModelSet>, camera: CameraCalibration, cnn1d: bool) -> Result<Self> {
+    /// The observers of one robot; the 1D-CNN only if `cnn1d` and the set ships one;
+    /// the planners on `planner`'s floor.
+    pub fn new(models: &Arc<ModelSet>, camera: CameraCalibration, cnn1d: bool, planner: Planner) -> Result<Self> {
         let m = &models.manifest;
         Ok(Observers {
             // The 1D-CNN reads the worker node's appearance only: no floor needed.
@@ -78,6 +89,8 @@ impl Observers {
             cnn1d: (cnn1d && m.models.cnn1d.is_some()).then(|| models.runner(ModelKind::Cnn1d)).transpose()?,
             cnn_rows: BTreeMap::new(),
             cvm: Cvm::new(spwi_proto::TICK_PERIOD.as_secs_f32()),
+            planner_mapped: planner.clone(),
+            planner,
             camera,
             row_layout: m.row,
             keypoints: None,
@@ -125,10 +138,22 @@ impl Observers {
         let (relations, facing) = self.row_layout.blocks(worker.as_ref(), self.facing.take(), &stations);
         let row = Row { own: embedding, keypoints: self.keypoints.take(), relations, facing, ..Row::default() };
         self.ego_rows.insert(t, row);
+        let team: Vec<(Station, [f32; 2])> =
+            Station::ALL.into_iter().filter_map(|k| floor_view.team_map.station(k).map(|at| (k, at))).collect();
+        // The planners follow the team's track on every tick it has one.
+        let (mut planned, mut planned_mapped) = (None, None);
+        if let Some(w) = floor_view.team_track(t) {
+            let (t_s, speed) = (t as f32 * spwi_proto::TICK_PERIOD.as_secs_f32(), w.velocity[0].hypot(w.velocity[1]));
+            let truth: Vec<(Station, [f32; 2])> = Station::ALL.into_iter().zip(station_spots.iter().copied()).collect();
+            planned = self.planner.observe(t_s, w.position, speed, &truth);
+            planned_mapped = self.planner_mapped.observe(t_s, w.position, speed, &team);
+        }
         let mut out = Predictions::default();
         if !seen {
             return Ok(out);
         }
+        out.planner = planned.map(|k| vec![k; self.horizon + 1]);
+        out.planner_mapped = planned_mapped.map(|k| vec![k; self.horizon + 1]);
         self.ego_rows.input(t, TemporalModel::Ego, &mut self.scratch);
         out.ego = Some(classes(&self.ego.gru(&self.scratch, &[])?));
         if let Some(cnn) = self.cnn1d.as_mut() {
@@ -147,8 +172,6 @@ impl Observers {
             out.cnn1d = Some(classes(&logits));
         }
         out.cvm = self.cvm.predict(station_spots).map(|k| vec![Station::ALL[k]; self.horizon + 1]);
-        let team: Vec<(Station, [f32; 2])> =
-            Station::ALL.into_iter().filter_map(|k| floor_view.team_map.station(k).map(|at| (k, at))).collect();
         let spots: Vec<[f32; 2]> = team.iter().map(|&(_, at)| at).collect();
         out.cvm_mapped = self.cvm.predict(&spots).map(|i| vec![team[i].0; self.horizon + 1]);
         for &(k, at) in &team {

@@ -27,6 +27,11 @@ pub enum Scored {
     Cvm,
     /// The same, on the stations the team mapped.
     CvmMapped,
+    /// Goal inference planning paths around the obstacles, on the team's track,
+    /// handed the true work spots.
+    Planner,
+    /// The same, on the stations the team mapped.
+    PlannerMapped,
     /// The paper's 1D-CNN + GRU baseline.
     Cnn1d,
     /// The collective GRU on the robot-ticks on which its robot also decided a class.
@@ -42,7 +47,7 @@ pub enum Scored {
 impl Scored {
     /// The robots' models, the team's decisions and the baselines, in the order the
     /// tables list them.
-    pub const LISTED: [Scored; 8] = [
+    pub const LISTED: [Scored; 10] = [
         Scored::TeamAllTicks,
         Scored::Gnn,
         Scored::Ego,
@@ -50,6 +55,8 @@ impl Scored {
         Scored::Consensus,
         Scored::Cvm,
         Scored::CvmMapped,
+        Scored::Planner,
+        Scored::PlannerMapped,
         Scored::Cnn1d,
     ];
 
@@ -66,6 +73,8 @@ impl Scored {
             Scored::TeamAllTicks => "team_all_ticks",
             Scored::Cvm => "cvm",
             Scored::CvmMapped => "cvm_mapped",
+            Scored::Planner => "planner",
+            Scored::PlannerMapped => "planner_mapped",
             Scored::Cnn1d => "cnn1d",
             Scored::CollectivePaired => "collective_paired",
             Scored::ConsensusPaired => "consensus_paired",

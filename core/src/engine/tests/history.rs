@@ -61,11 +61,11 @@ fn publishes(e: &mut Engine, t: u64) -> bool {
     !decisions(&only_b_votes_out(e, t)).is_empty()
 }
 
-/// `e` hears a's share of tick `t`, which names a's decision of tick 30: the team was
-/// at work before a robot that came at tick 31.
+/// `e` hears a's share of tick `t`, which names a's decision of tick 20: the team was
+/// at work a second before a robot that came at tick 31.
 fn hears_a_team_at_work(e: &mut Engine, t: u64) {
     let mut s = share("a", t, None, None, None);
-    s.verdict = Some(Verdict { tick: 30, class: None, voters: vec![], digest: 0 });
+    s.verdict = Some(Verdict { tick: 20, class: None, voters: vec![], digest: 0 });
     e.handle(Input::Embedding(s), ms(100 * t));
 }
 
@@ -220,9 +220,10 @@ fn robots_that_start_together_withhold_nothing() {
         n.handle(Input::MemberJoined(id(p)), ms(3100));
     }
     let mut s = share("a", 32, None, None, None);
-    s.verdict = Some(Verdict { tick: 31, class: None, voters: vec![], digest: 0 });
+    // n came at tick 31, when its window reached back to tick 26.
+    s.verdict = Some(Verdict { tick: 27, class: None, voters: vec![], digest: 0 });
     n.handle(Input::Embedding(s), ms(3200));
-    assert!(publishes(&mut n, 32), "a decided tick 31, the tick n came: a started with n");
+    assert!(publishes(&mut n, 32), "a decided tick 27, within the window n came with: a started with n");
     assert_eq!((n.metrics.decisions_withheld, n.metrics.histories_asked), (0, 1));
 }
 
