@@ -10,8 +10,7 @@
 //! one lesson without votes, whose tick is the first it decided: "what came before
 //! this?"), and a few of them ([`EngineConfig::relayers`], ranked by a hash of the
 //! asker's id, the same few on every robot) send the lessons they learned over the
-//! [`MAX_HISTORY_TICKS`] ticks before it, if they have any: robots that started
-//! together have none to send each other. The newcomer learns them, in tick order and
+//! [`MAX_HISTORY_TICKS`] ticks before it. The newcomer learns them, in tick order and
 //! before its own, from a fresh book: it judges the same signed votes its peers judged.
 //!
 //! The newcomer asks, rather than its peers sending whenever a member appears: on a
@@ -20,17 +19,20 @@
 //! A robot asks only in its first seconds, at most [`HISTORY_ASKS`] times a second
 //! apart, until a history comes; a peer answers one asker at most once a second. An
 //! ask often arrives before its asker's liveliness token: the peer keeps it (a few, for
-//! [`ASK_KEPT`]) and answers when the asker becomes a member. A peer that has learned
-//! nothing before the asked tick (robots that started together) answers with an empty
-//! history: "nothing came before".
+//! [`ASK_KEPT`]) and answers when the asker becomes a member. Only a peer that was
+//! deciding before the asked tick answers: with its lessons, or with an empty history
+//! if it learned none ("nothing came before"). Robots that started together (within
+//! the window of each other) answer each other nothing.
 //!
 //! Until its history comes, the newcomer would decide with a book that trusts every
 //! member alike, and name no station where its peers name one: measured again on the
-//! container fleet, the fresh robots of six decided 5 of their first 50 ticks
-//! otherwise. So a robot catching up withholds its decisions (it still votes, shares,
-//! relays and learns): from its first ask until a history taught it, or every member
-//! that tells it answered, or [`EngineConfig::catch_up`] passed — whichever comes first,
-//! so that no peer can keep it silent by not answering.
+//! container fleet, the fresh robots of six decided 5 of their first 50 ticks so. So a
+//! robot that joins a team at work — a member's share names a decision of a tick before
+//! the oldest the robot could take when it came — withholds its decisions while it
+//! catches up (it still votes, shares, relays and learns): from its first ask until a
+//! history taught it, or every member that tells it answered, or
+//! [`EngineConfig::catch_up`] passed, whichever comes first, so that no peer can keep it
+//! silent by not answering. Robots that start together withhold nothing.
 //!
 //! What a history can cost and do: it is taken only from a live member, only for ticks
 //! within [`MAX_HISTORY_TICKS`] of now and before the first tick the receiver decided

@@ -199,16 +199,17 @@ impl Planner {
         self.normalise();
     }
 
-    /// The worker works at `k`: the prediction is `k`, and its next goal any other.
+    /// The worker works at `k`: the prediction is `k`, and its next goal any other
+    /// candidate alike.
     fn stand_at(&mut self, k: Station) {
         self.at = Some(k);
-        let others = self.belief.iter().enumerate().filter(|&(i, &b)| i != k.index() && b > 0.0).count();
-        for (i, b) in self.belief.iter_mut().enumerate() {
-            if *b > 0.0 || i == k.index() {
-                *b = if i == k.index() || others == 0 { 0.0 } else { 1.0 / others as f32 };
-            }
+        let others: Vec<usize> =
+            self.paths.goals.iter().map(|(g, _, _)| g.index()).filter(|&i| i != k.index()).collect();
+        self.belief = [0.0; NUM_CLASSES];
+        for &i in &others {
+            self.belief[i] = 1.0 / others.len() as f32;
         }
-        if others == 0 {
+        if others.is_empty() {
             self.belief[k.index()] = 1.0;
         }
     }
