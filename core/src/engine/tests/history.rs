@@ -49,9 +49,8 @@ fn only_b_votes(e: &mut Engine, t: u64) -> (Vec<RobotId>, Option<Station>) {
     (d.voters, d.steps.first().map(|s| s.class))
 }
 
-/// A newcomer that withholds its decisions for up to a second while it catches up.
-fn catching_up_engine(set: &Arc<ModelSet>) -> Engine {
-    let mut n = engine("n", set);
+/// `n`, withholding its decisions for up to a second while it catches up.
+fn catching_up(mut n: Engine) -> Engine {
     n.cfg.catch_up = Duration::from_secs(1);
     n
 }
@@ -61,12 +60,17 @@ fn publishes(e: &mut Engine, t: u64) -> bool {
     !decisions(&only_b_votes_out(e, t)).is_empty()
 }
 
-/// `e` hears a's share of tick `t`, which names a's decision of tick 20: the team was
-/// at work a second before a robot that came at tick 31.
-fn hears_a_team_at_work(e: &mut Engine, t: u64) {
+/// `e` hears a's share of tick `t`, naming a's decision of tick `decided`.
+fn hears_a_decided(e: &mut Engine, t: u64, decided: u64) {
     let mut s = share("a", t, None, None, None);
-    s.verdict = Some(Verdict { tick: 20, class: None, voters: vec![], digest: 0 });
+    s.verdict = Some(Verdict { tick: decided, class: None, voters: vec![], digest: 0 });
     e.handle(Input::Embedding(s), ms(100 * t));
+}
+
+/// `e` hears that a decided tick 20: the team was at work a second before a robot that
+/// came at tick 31.
+fn hears_a_team_at_work(e: &mut Engine, t: u64) {
+    hears_a_decided(e, t, 20);
 }
 
 fn history_of(out: &[Output]) -> Option<HistoryMsg> {
@@ -152,7 +156,7 @@ fn a_newcomer_withholds_its_decisions_until_the_teams_history_taught_it() {
     let set = models();
     let mut a = veteran_of(1..=30, &set);
     let joined = ms(3100);
-    let mut n = catching_up_engine(&set);
+    let mut n = catching_up(engine("n", &set));
     let ask = history_of(&n.handle(Input::MemberJoined(id("a")), joined)).expect("the newcomer asks");
     for p in ["b", "c", "d"] {
         n.handle(Input::MemberJoined(id(p)), joined);
@@ -178,15 +182,11 @@ fn a_newcomer_withholds_its_decisions_until_the_teams_history_taught_it() {
 #[test]
 fn a_newcomer_told_nothing_came_before_by_every_teller_publishes_at_once() {
     let set = models();
-    let joined = ms(3100);
-    let mut n = catching_up_engine(&set);
-    for p in ["a", "b", "c", "d"] {
-        n.handle(Input::MemberJoined(id(p)), joined);
-    }
+    let mut n = catching_up(newcomer(&set, ms(3100)));
     hears_a_team_at_work(&mut n, 32);
     let nothing = |r: &str| Input::History(HistoryMsg { robot: id(r), instance: 2, lessons: vec![] });
     for p in ["a", "b", "c"] {
-        n.handle(nothing(p), joined);
+        n.handle(nothing(p), ms(3100));
     }
     assert!(!publishes(&mut n, 32), "d has not answered");
     n.handle(nothing("d"), ms(3300));
@@ -199,10 +199,7 @@ fn a_newcomer_told_nothing_came_before_by_every_teller_publishes_at_once() {
 #[test]
 fn a_newcomer_nobody_answers_publishes_once_its_catch_up_time_passed() {
     let set = models();
-    let mut n = catching_up_engine(&set);
-    for p in ["a", "b", "c", "d"] {
-        n.handle(Input::MemberJoined(id(p)), ms(3100));
-    }
+    let mut n = catching_up(newcomer(&set, ms(3100)));
     hears_a_team_at_work(&mut n, 35);
     assert!(!publishes(&mut n, 35));
     assert!(!publishes(&mut n, 40), "0.99 s after the ask");
@@ -215,14 +212,9 @@ fn a_newcomer_nobody_answers_publishes_once_its_catch_up_time_passed() {
 #[test]
 fn robots_that_start_together_withhold_nothing() {
     let set = models();
-    let mut n = catching_up_engine(&set);
-    for p in ["a", "b", "c", "d"] {
-        n.handle(Input::MemberJoined(id(p)), ms(3100));
-    }
-    let mut s = share("a", 32, None, None, None);
+    let mut n = catching_up(newcomer(&set, ms(3100)));
     // n came at tick 31, when its window reached back to tick 26.
-    s.verdict = Some(Verdict { tick: 27, class: None, voters: vec![], digest: 0 });
-    n.handle(Input::Embedding(s), ms(3200));
+    hears_a_decided(&mut n, 32, 27);
     assert!(publishes(&mut n, 32), "a decided tick 27, within the window n came with: a started with n");
     assert_eq!((n.metrics.decisions_withheld, n.metrics.histories_asked), (0, 1));
 }
