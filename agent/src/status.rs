@@ -86,6 +86,22 @@ pub struct Status {
     pub health: Health,
     /// The floor plan this robot was given, if any, and what its cameras say of it.
     pub floor_plan: Option<FloorPlanStatus>,
+    /// Everyone this robot tracks on the floor and saw lately, under the team's ids
+    /// (`spwi_core::floor::worker_ids`), as it last shared them; empty when it is not
+    /// localised.
+    pub people: Vec<PersonStatus>,
+}
+
+/// One person this robot tracks, under the team's id.
+#[derive(Debug, Clone, Serialize)]
+pub struct PersonStatus {
+    /// The team's id, as a number and as the short name a page or log shows.
+    pub worker: u64,
+    pub name: String,
+    pub position: [f32; 2],
+    pub velocity: [f32; 2],
+    /// The tick this place is of.
+    pub tick: u64,
 }
 
 /// The floor plan as the robot's team map stands against it.
@@ -173,6 +189,17 @@ impl Status {
         self.metrics = engine.metrics().clone();
         self.transport = transport.clone();
         self.clocks = engine.peer_clocks().clone();
+        let (tick, people) = engine.floor().worker_ids().shared();
+        self.people = people
+            .iter()
+            .map(|p| PersonStatus {
+                worker: p.worker.0,
+                name: p.worker.to_string(),
+                position: p.estimate.position,
+                velocity: p.estimate.velocity,
+                tick,
+            })
+            .collect();
         if let Some(plan) = self.floor_plan.as_mut() {
             plan.contradicted = engine.floor().team_map.contradicts().into_iter().map(|k| k.name()).collect();
         }

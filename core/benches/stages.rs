@@ -171,6 +171,10 @@ fn bench_codec() {
             voters: (0..4).map(|i| RobotId::new(format!("r{i}")).unwrap()).collect(),
             digest: 0x5eed,
         }),
+        people: vec![PersonShare {
+            worker: WorkerId(7),
+            estimate: WorkerEstimate { position: [3.0, 4.0], velocity: [1.0, 0.2], covariance: [0.05, 0.01, 0.2] },
+        }],
     };
     let d = DecisionMsg {
         robot: f.robot.clone(),

@@ -14,7 +14,7 @@ use serde::Serialize;
 /// The protocol this build speaks, first in every message. Bumped on every
 /// incompatible change of any payload: a message of another version is refused and
 /// counted (`DecodeError::UnknownVersion`), never misread.
-pub const PROTOCOL_VERSION: u16 = 10;
+pub const PROTOCOL_VERSION: u16 = 11;
 
 /// Largest message accepted. A full detection frame (64 objects × 512 floats) is
 /// about 135 KB.
@@ -139,6 +139,7 @@ pub fn decode_from<M: Message>(bytes: &[u8], key_robot: &RobotId) -> Result<M, D
 mod tests {
     use super::*;
     use crate::station::Station;
+    use crate::WorkerId;
 
     /// Recordings hold messages as JSON and replay them bit for bit: every f32 must
     /// come back from serde_json's text as the same bits. Half a million values, spread
@@ -190,9 +191,9 @@ mod tests {
             MapMsg { robot: RobotId::new("r1").unwrap(), instance: 7, stations: [Some([1.0, 2.0]), None, None, None] };
         let bytes = encode(&map);
         let expected: Vec<u8> =
-            vec![0x0a, 0x02, 0x72, 0x31, 0x07, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00];
+            vec![0x0b, 0x02, 0x72, 0x31, 0x07, 0x01, 0x00, 0x00, 0x80, 0x3f, 0x00, 0x00, 0x00, 0x40, 0x00, 0x00, 0x00];
         assert_eq!(bytes, expected);
-        assert_eq!(PROTOCOL_VERSION, 10, "docs/PROTOCOL.md names version 10 and its first byte");
+        assert_eq!(PROTOCOL_VERSION, 11, "docs/PROTOCOL.md names version 11 and its first byte");
         assert_eq!(decode::<MapMsg>(&bytes).unwrap(), map);
     }
 
@@ -257,7 +258,60 @@ mod tests {
             facing: None,
             landmarks: Vec::new(),
             verdict: None,
+            people: Vec::new(),
         }
+    }
+
+    #[test]
+    fn people_are_bounded_named_once_and_their_estimates_checked() {
+        let at = |x: f32| WorkerEstimate { position: [x, 1.0], velocity: [0.0; 2], covariance: [0.1, 0.0, 0.1] };
+        let person = |id: u64, x: f32| PersonShare { worker: WorkerId(id), estimate: at(x) };
+        let now = EmbeddingMsg { people: (0..8).map(|i| person(i, i as f32)).collect(), ..embedding() };
+        assert_eq!(decode::<EmbeddingMsg>(&encode(&now)).unwrap(), now);
+        let refused = |people: Vec<PersonShare>| {
+            decode::<EmbeddingMsg>(&encode(&EmbeddingMsg { people, ..embedding() })).unwrap_err().to_string()
+        };
+        let e = refused((0..9).map(|i| person(i, i as f32)).collect());
+        assert!(e.contains("field `people`") && e.contains("9 people, at most 8"), "{e}");
+        let e = refused(vec![person(3, 1.0), person(4, 2.0), person(3, 5.0)]);
+        assert!(e.contains("field `people.worker`") && e.contains("named twice"), "{e}");
+        let mut bad = person(1, 1.0);
+        bad.estimate.covariance = [-1.0, 0.0, 0.1];
+        let e = refused(vec![bad]);
+        assert!(e.contains("field `people.estimate.covariance`"), "{e}");
+    }
+
+    #[test]
+    fn a_version_10_embedding_without_people_is_refused() {
+        #[derive(serde::Serialize)]
+        struct EmbeddingV10 {
+            robot: RobotId,
+            instance: u64,
+            tick: u64,
+            embedding: Option<Vec<f32>>,
+            visibility: u32,
+            vote: Option<VoteMsg>,
+            worker: Option<WorkerEstimate>,
+            facing: Option<f32>,
+            landmarks: Vec<Landmark>,
+            verdict: Option<Verdict>,
+        }
+        let e = embedding();
+        let old = EmbeddingV10 {
+            robot: e.robot,
+            instance: e.instance,
+            tick: e.tick,
+            embedding: None,
+            visibility: 3,
+            vote: None,
+            worker: None,
+            facing: None,
+            landmarks: Vec::new(),
+            verdict: None,
+        };
+        let b = bincode::serde::encode_to_vec((10u16, old), CONFIG).unwrap();
+        let e = decode::<EmbeddingMsg>(&b).unwrap_err();
+        assert!(matches!(e, DecodeError::UnknownVersion { got: 10, .. }), "{e}");
     }
 
     #[test]

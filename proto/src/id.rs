@@ -90,6 +90,22 @@ macro_rules! id_type {
 id_type!(RobotId, "robot");
 id_type!(FleetId, "fleet");
 
+/// A worker's id in the team: the same on every robot that tracks the worker, so that
+/// what each robot shares of a person names the same person for all. The robot that
+/// first tracks a person no peer names mints it from its own robot id, instance and
+/// track; robots that see the same person adopt it, and of two ids that turn out to
+/// name one person the smaller survives (`spwi_core::floor::team_workers`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(transparent)]
+pub struct WorkerId(pub u64);
+
+impl fmt::Display for WorkerId {
+    /// The last 16 bits in hex: short enough for a terminal, a log line or a page.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "w{:04x}", self.0 & 0xffff)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

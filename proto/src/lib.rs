@@ -4,7 +4,7 @@
 //! simulated world and the tests cannot disagree about the format:
 //!
 //! ```text
-//! id.rs        RobotId / FleetId: validated, one key segment, no wildcards
+//! id.rs        RobotId / FleetId: validated, one key segment, no wildcards; WorkerId
 //! keys.rs      every key expression, built and parsed in one place
 //! station.rs   the four stations: what is predicted, voted and decided
 //! messages.rs  the payloads (detection frame, embedding, vote, decision, truth)
@@ -25,6 +25,6 @@ pub mod station;
 pub use codec::{
     decode, decode_from, encode, from_json, to_json, DecodeError, Message, MAX_MESSAGE_BYTES, PROTOCOL_VERSION,
 };
-pub use id::{FleetId, IdError, RobotId};
+pub use id::{FleetId, IdError, RobotId, WorkerId};
 pub use messages::*;
 pub use station::{Station, UnknownStation, NUM_CLASSES};

@@ -2,7 +2,7 @@
 //! [`Validate::validate`] on everything it decodes, so a value of these types that came
 //! from the network has the dimensions documented here and only finite floats.
 
-use crate::id::RobotId;
+use crate::id::{RobotId, WorkerId};
 use crate::station::{Station, NUM_CLASSES};
 use serde::{Deserialize, Serialize};
 
@@ -264,20 +264,47 @@ pub struct WorkerEstimate {
     pub covariance: [f32; 3],
 }
 
+/// The names an estimate's fields go by in an error: where in a message it sits.
+struct EstimateFields {
+    position: &'static str,
+    velocity: &'static str,
+    covariance: &'static str,
+}
+
+const WORKER_FIELDS: EstimateFields =
+    EstimateFields { position: "worker.position", velocity: "worker.velocity", covariance: "worker.covariance" };
+const PEOPLE_FIELDS: EstimateFields = EstimateFields {
+    position: "people.estimate.position",
+    velocity: "people.estimate.velocity",
+    covariance: "people.estimate.covariance",
+};
+
 impl WorkerEstimate {
     fn validate(&self) -> Result<(), Invalid> {
-        finite("worker.position", &self.position)?;
-        finite("worker.velocity", &self.velocity)?;
-        finite("worker.covariance", &self.covariance)?;
+        self.validate_as(&WORKER_FIELDS)
+    }
+
+    fn validate_as(&self, names: &EstimateFields) -> Result<(), Invalid> {
+        finite(names.position, &self.position)?;
+        finite(names.velocity, &self.velocity)?;
+        finite(names.covariance, &self.covariance)?;
         let [pp, pv, vv] = self.covariance;
         if pp <= 0.0 || vv <= 0.0 || pv * pv > pp * vv * (1.0 + 1e-4) {
             return Err(invalid(
-                "worker.covariance",
+                names.covariance,
                 format!("{:?} is not a covariance (positive definite)", self.covariance),
             ));
         }
         Ok(())
     }
+}
+
+/// One person a robot tracks on the floor, under the team's id for that person: what
+/// lets every robot of the team name each worker alike.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct PersonShare {
+    pub worker: WorkerId,
+    pub estimate: WorkerEstimate,
 }
 
 /// An object that marks a station, seen this tick, back-projected onto the floor.
@@ -344,6 +371,10 @@ pub struct EmbeddingMsg {
     pub facing: Option<f32>,
     pub landmarks: Vec<Landmark>,
     pub verdict: Option<Verdict>,
+    /// Everyone the robot tracks on the floor and has seen in the last half second
+    /// (at most [`MAX_HUMANS`], each team id once), under the team's ids: empty when it
+    /// is not localised.
+    pub people: Vec<PersonShare>,
 }
 
 impl Validate for EmbeddingMsg {
@@ -368,6 +399,15 @@ impl Validate for EmbeddingMsg {
         }
         if let Some(v) = &self.verdict {
             sorted_voters("verdict.voters", &v.voters)?;
+        }
+        if self.people.len() > MAX_HUMANS {
+            return Err(invalid("people", format!("{} people, at most {MAX_HUMANS}", self.people.len())));
+        }
+        for (i, p) in self.people.iter().enumerate() {
+            p.estimate.validate_as(&PEOPLE_FIELDS)?;
+            if self.people[..i].iter().any(|q| q.worker == p.worker) {
+                return Err(invalid("people.worker", format!("worker {} named twice", p.worker)));
+            }
         }
         if let Some(v) = &self.vote {
             v.validate()?;

@@ -81,6 +81,13 @@ fn examples() -> Vec<(&'static str, Vec<u8>, serde_json::Value)> {
         facing: Some(-0.5),
         landmarks: vec![Landmark { station: Station::Assembly, position: [6.0, 1.5], sigma: 0.25 }],
         verdict: Some(Verdict::of(&decision())),
+        people: vec![
+            PersonShare { worker: WorkerId(0x0123_4567_89ab_cdef), estimate: vote().worker.unwrap() },
+            PersonShare {
+                worker: WorkerId(42),
+                estimate: WorkerEstimate { position: [1.0, 2.0], velocity: [0.0, -0.5], covariance: [0.5, 0.25, 1.0] },
+            },
+        ],
     };
     let ballots = BallotsMsg {
         robot: id("r2"),

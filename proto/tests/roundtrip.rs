@@ -82,12 +82,14 @@ proptest! {
                              facing in prop::option::of(finite()),
                              landmarks in prop::collection::vec((station(), finite(), finite(), 0.01f32..5.0), 0..8),
                              verdict in prop::option::of((any::<u64>(), prop::option::of(station()), prop::collection::btree_set(robot(), 0..10), any::<u64>())),
-                             vote in prop::option::of((steps(), 0.0f32..=1.0))) {
+                             vote in prop::option::of((steps(), 0.0f32..=1.0)),
+                             people in prop::collection::btree_map(any::<u64>(), (finite(), finite()), 0..=8)) {
         let worker = worker.map(|(x, y, vx, vy, pp, pv, vv)| WorkerEstimate { position: [x, y], velocity: [vx, vy], covariance: [pp, pv * pp.sqrt(), vv] });
         let landmarks = landmarks.into_iter().map(|(station, x, y, sigma)| Landmark { station, position: [x, y], sigma }).collect();
         let verdict = verdict.map(|(tick, class, voters, digest)| Verdict { tick, class, voters: voters.into_iter().collect(), digest });
         let vote = vote.map(|(steps, quality)| VoteMsg { robot: robot.clone(), instance, tick, steps, visibility, quality, worker, signature: vec![7; 64] });
-        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, vote, worker, facing, landmarks, verdict };
+        let people = people.into_iter().map(|(id, (x, y))| PersonShare { worker: WorkerId(id), estimate: WorkerEstimate { position: [x, y], velocity: [0.5, 0.0], covariance: [0.25, 0.0, 1.0] } }).collect();
+        let m = EmbeddingMsg { robot, instance, tick, embedding: e, visibility, vote, worker, facing, landmarks, verdict, people };
         prop_assert_eq!(decode::<EmbeddingMsg>(&encode(&m)).unwrap(), m);
     }
 

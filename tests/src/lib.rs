@@ -195,6 +195,7 @@ pub fn lying_share(robot: &RobotId, tick: u64, class: Station) -> EmbeddingMsg {
         facing: None,
         landmarks: Vec::new(),
         verdict: None,
+        people: Vec::new(),
     }
 }
 

@@ -105,6 +105,7 @@ async fn bad_messages_on_every_key_are_dropped_and_counted_while_decisions_go_on
             facing: None,
             landmarks: vec![],
             verdict: None,
+            people: Vec::new(),
         };
         let mut wrong_version = encode(&good);
         wrong_version[0] = 99;

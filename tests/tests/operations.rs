@@ -109,6 +109,11 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         assert!(status["roster_version"].is_null(), "an open fleet holds no roster");
         assert_eq!(status["floor_plan"]["stations"], 1, "the plan it was given");
         assert!(status["floor_plan"]["contradicted"].is_array(), "{}", status["floor_plan"]);
+        // The scripted robot is localised and sees one person: named with a team id.
+        let people = status["people"].as_array().expect("people");
+        assert_eq!(people.len(), 1, "{people:?}");
+        let w = people[0]["worker"].as_u64().unwrap();
+        assert_eq!(people[0]["name"], format!("w{:04x}", w & 0xffff));
         let trust = status["trust"].as_object().expect("trust per voter");
         assert!(!trust.is_empty() && trust.keys().all(|r| r == "h0" || r == "h1"), "{trust:?}");
         assert!(trust.values().all(|t| (0.0..=1.0).contains(&t.as_f64().unwrap())), "{trust:?}");

@@ -149,6 +149,7 @@ async fn impersonate(session: zenoh::Session, fleet: FleetId, robot: RobotId, pe
             facing: None,
             landmarks: Vec::new(),
             verdict: None,
+            people: Vec::new(),
         };
         let messages = [
             (Topic::Embedding, encode(&share)),

@@ -142,6 +142,7 @@ pub async fn run(
             .floor_plan
             .as_ref()
             .map(|p| FloorPlanStatus { stations: p.len(), ..Default::default() }),
+        people: Vec::new(),
     }));
     let mut http_task = None;
     let mut http_addr = None;

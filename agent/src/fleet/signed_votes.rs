@@ -225,6 +225,7 @@ mod tests {
             facing: None,
             landmarks: Vec::new(),
             verdict: None,
+            people: Vec::new(),
         };
         let signed = |s: &mut SignedVotes, v: VoteMsg| {
             let mut out = Output::Embedding(share(v));

@@ -23,11 +23,11 @@ __all__ = [
     "MAX_OBJECTS", "MAX_LANDMARKS", "MAX_STEPS", "MAX_MEMBERS", "MAX_HISTORY_TICKS", "MAX_HUMANS", "TICK_US",
     "Invalid", "Station", "ObjectClass", "DecidedBy", "WorkerPhase",
     "BBox", "FloorPose", "HumanDetection", "ObjectDetection", "DetectionFrame", "WorkerEstimate",
-    "StepVote", "VoteMsg", "Landmark", "Verdict", "EmbeddingMsg", "BallotsMsg", "MapMsg", "Lesson", "HistoryMsg",
+    "StepVote", "VoteMsg", "Landmark", "Verdict", "PersonShare", "EmbeddingMsg", "BallotsMsg", "MapMsg", "Lesson", "HistoryMsg",
     "TeamStep", "DecisionMsg", "RobotPose", "TruthMsg",
 ]  # fmt: skip
 
-PROTOCOL_VERSION = 10
+PROTOCOL_VERSION = 11
 MAX_MESSAGE_BYTES = 256 * 1024
 FEATURE_DIM = 512
 KEYPOINT_VALUES = 34
@@ -226,13 +226,13 @@ class WorkerEstimate:
     velocity: Vec2
     covariance: Annotated[list[F32], Fixed(3)]
 
-    def validate(self) -> None:
-        _finite("worker.position", self.position)
-        _finite("worker.velocity", self.velocity)
-        _finite("worker.covariance", self.covariance)
+    def validate(self, prefix: str = "worker") -> None:
+        _finite(f"{prefix}.position", self.position)
+        _finite(f"{prefix}.velocity", self.velocity)
+        _finite(f"{prefix}.covariance", self.covariance)
         pp, pv, vv = self.covariance
         if pp <= 0 or vv <= 0 or pv * pv > pp * vv * (1 + 1e-4):
-            raise Invalid("worker.covariance", f"{self.covariance} is not a covariance (positive definite)")
+            raise Invalid(f"{prefix}.covariance", f"{self.covariance} is not a covariance (positive definite)")
 
 
 @dataclass
@@ -282,6 +282,14 @@ class Verdict:
 
 
 @dataclass
+class PersonShare:
+    """One person a robot tracks, under the team's id for that person (docs/PROTOCOL.md)."""
+
+    worker: U64
+    estimate: WorkerEstimate
+
+
+@dataclass
 class EmbeddingMsg:
     """A robot's share of a tick: its embedding, its vote, what it knows on the floor."""
 
@@ -295,6 +303,7 @@ class EmbeddingMsg:
     facing: Optional[F32]
     landmarks: list[Landmark]
     verdict: Optional[Verdict]
+    people: list[PersonShare] = field(default_factory=list)
 
     def validate(self) -> None:
         if self.embedding is not None:
@@ -311,6 +320,12 @@ class EmbeddingMsg:
                 raise Invalid("landmarks.sigma", f"{m.sigma} must be a positive number")
         if self.verdict is not None:
             _sorted_ids("verdict.voters", self.verdict.voters)
+        if len(self.people) > MAX_HUMANS:
+            raise Invalid("people", f"{len(self.people)} people, at most {MAX_HUMANS}")
+        for i, p in enumerate(self.people):
+            p.estimate.validate("people.estimate")
+            if any(q.worker == p.worker for q in self.people[:i]):
+                raise Invalid("people.worker", f"worker {p.worker} named twice")
         if self.vote is not None:
             self.vote.validate()
             if (self.vote.robot, self.vote.instance, self.vote.tick) != (self.robot, self.instance, self.tick):

@@ -75,6 +75,20 @@ class Refused(unittest.TestCase):
             with self.subTest(error=error), self.assertRaisesRegex(spwi.Invalid, error):
                 spwi.encode(frame(**changes))
 
+    def test_people_in_a_share_are_at_most_eight_each_named_once(self):
+        share = spwi.decode("spwi/f1/robot/r1/embedding", (GOLDEN / "embedding.bin").read_bytes())
+        self.assertEqual([p.worker for p in share.people], [0x0123_4567_89AB_CDEF, 42])
+        person = share.people[1]
+        cases = [
+            ([person] * 2, "people.worker.*named twice"),
+            ([spwi.PersonShare(i, person.estimate) for i in range(9)], "people.*9 people, at most 8"),
+            ([spwi.PersonShare(1, spwi.WorkerEstimate([0.0, 0.0], [0.0, 0.0], [-1.0, 0.0, 1.0]))], "people.estimate.covariance"),
+        ]
+        for people, error in cases:
+            share.people = people
+            with self.subTest(error=error), self.assertRaisesRegex(spwi.Invalid, error):
+                spwi.encode(share)
+
 
 if __name__ == "__main__":
     unittest.main()

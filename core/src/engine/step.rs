@@ -37,6 +37,8 @@ pub(super) struct PeerView {
     embedding: Option<Vec<f32>>,
     worker: Option<WorkerEstimate>,
     facing: Option<f32>,
+    /// The people it tracks, under the team's ids.
+    people: Vec<PersonShare>,
 }
 
 /// What our own frame gave for a tick, until it is voted on.
@@ -99,6 +101,8 @@ impl Engine {
         }
         // The track first: a graph of floor relations places the objects against it.
         let (worker, landmarks) = if stale { (None, Vec::new()) } else { self.floor.observe(&f) };
+        // Without a pose nobody is placed on the floor: we name and share nobody.
+        let people = if stale || f.pose.is_none() { Vec::new() } else { self.name_people(tick) };
         let on_floor = worker.as_ref().map(|worker| OnFloor { camera: self.floor.camera(), worker });
         let t0 = Instant::now();
         let embedding = match self.graph.build(&f, on_floor) {
@@ -144,6 +148,7 @@ impl Engine {
             facing,
             landmarks,
             verdict: self.unshared_verdict.take(),
+            people,
         }));
         let me = self.cfg.robot.clone();
         let open = self.open_tick(tick, now);
@@ -187,9 +192,9 @@ impl Engine {
         if from_peer && self.peer_views.get(&e.robot).is_none_or(|v| v.tick <= e.tick) {
             // A stale peer is heard as one that does not see the worker.
             let view = if stale {
-                PeerView { tick: e.tick, embedding: None, worker: None, facing: None }
+                PeerView { tick: e.tick, embedding: None, worker: None, facing: None, people: Vec::new() }
             } else {
-                PeerView { tick: e.tick, embedding: e.embedding, worker: e.worker, facing: e.facing }
+                PeerView { tick: e.tick, embedding: e.embedding, worker: e.worker, facing: e.facing, people: e.people }
             };
             self.peer_views.insert(e.robot.clone(), view);
         }
@@ -215,6 +220,24 @@ impl Engine {
                 _ => {}
             },
         }
+    }
+
+    /// Names the people we track at `t` with the team's ids (`floor/worker_ids.rs`),
+    /// from the lists of the peers whose word on the worker we fuse, predicted to `t`.
+    fn name_people(&mut self, t: u64) -> Vec<PersonShare> {
+        let trust = &self.trust;
+        let peers: Vec<Vec<PersonShare>> = self
+            .peer_views
+            .iter()
+            .filter(|(r, v)| v.tick <= t && t - v.tick <= PEER_VIEW_TICKS && trust.fuses(r))
+            .map(|(_, v)| {
+                let ahead = |p: &PersonShare| PersonShare { estimate: floor::predict(&p.estimate, t - v.tick), ..*p };
+                v.people.iter().map(ahead).collect()
+            })
+            .collect();
+        let rank = self.live.iter().filter(|r| **r < self.cfg.robot).count();
+        let me = floor::Minter { robot: &self.cfg.robot, instance: self.cfg.instance, rank };
+        self.floor.name_people(t, me, &peers)
     }
 
     /// Adds tick `t`'s window row from our own view of it and our peers' latest shares

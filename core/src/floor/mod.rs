@@ -6,7 +6,8 @@
 //! frame is back-projected through the robot's calibrated camera at its pose
 //! ([`calibration`]), the worker is tracked with a constant-velocity filter
 //! ([`track`]) whose estimate the robots share and fuse, everyone else in view is
-//! tracked too so that the worker followed stays the same person ([`people`]), the
+//! tracked too so that the worker followed stays the same person ([`people`]) and
+//! named with ids every robot of the team gives alike ([`worker_ids`]), the
 //! station objects seen by
 //! any robot build a shared map ([`stations`]), and the temporal model reads the
 //! worker's relation to every mapped station ([`relations`]) — distance, bearing
@@ -21,16 +22,19 @@ pub mod people;
 pub mod plan;
 pub mod relations;
 pub mod stations;
+
 pub mod track;
+pub mod worker_ids;
 
 pub use calibration::CameraCalibration;
 pub use people::{People, Seen};
 pub use plan::{FloorPlan, PlannedObstacle, PlannedStation};
 pub use relations::{facing, fuse_facings, peer_set, relations, FACING_DIM, RELATION_DIM};
 pub use stations::StationMap;
-pub use track::{agrees_with_most, fuse, held_at, sightings, team_worker, Sighting, TeamWorker, Track};
+pub use track::{agrees_with_most, fuse, held_at, predict, sightings, team_worker, Sighting, TeamWorker, Track};
+pub use worker_ids::{Minter, WorkerIds};
 
-use spwi_proto::{DetectionFrame, HumanDetection, Landmark, WorkerEstimate};
+use spwi_proto::{DetectionFrame, HumanDetection, Landmark, PersonShare, WorkerEstimate};
 
 /// How far from where its track predicts the worker a person may stand and still be
 /// the worker a robot follows, metres.
@@ -50,6 +54,8 @@ pub struct FloorView {
     /// Everyone in view, tracked on the floor, and which of them this robot follows.
     people: People,
     followed: Option<u32>,
+    /// The team's id of each person tracked.
+    names: WorkerIds,
     pub own_map: StationMap,
     pub team_map: StationMap,
 }
@@ -62,6 +68,7 @@ impl FloorView {
             team_track: None,
             people: People::default(),
             followed: None,
+            names: WorkerIds::default(),
             own_map: StationMap::default(),
             team_map: StationMap::default(),
         }
@@ -153,6 +160,18 @@ impl FloorView {
             Some(&(i, _, _)) => frame.humans.swap(0, i),
             None => frame.humans.clear(),
         }
+    }
+
+    /// Names everyone this robot tracks at `tick` with the team's ids, from its peers'
+    /// lists predicted to `tick` ([`worker_ids`]): what it shares of them. Called
+    /// after [`FloorView::observe`] took in a frame with a pose.
+    pub fn name_people(&mut self, tick: u64, me: Minter, peers: &[Vec<PersonShare>]) -> Vec<PersonShare> {
+        self.names.name(tick, me, &self.people, peers)
+    }
+
+    /// The team's ids of the people this robot tracks.
+    pub fn worker_ids(&self) -> &WorkerIds {
+        &self.names
     }
 
     /// The team's track of the worker, if it was updated at `tick`.

@@ -19,6 +19,10 @@ use spwi_proto::WorkerEstimate;
 /// How far from where its track predicts a person a detection may be and still be
 /// that person, metres (a person walks ≈ 1.3 m/s; detections on the floor are ± 0.3 m).
 pub const GATE_M: f32 = 1.5;
+/// How far a person may walk in a tick, metres (a brisk 1.5 m/s): the gate of a track
+/// not seen for a while grows by this much a tick, since its prediction may have
+/// walked on while its person stopped, or the other way round.
+pub const WALK_M_PER_TICK: f32 = 0.15;
 
 /// One person in view: where the detector's person stands on the floor, how sure
 /// that place is (standard deviation, m), and the detector's track id if any.
@@ -67,35 +71,16 @@ impl People {
         // Then the least total distance over the rest.
         let rows: Vec<usize> = (0..seen.len()).filter(|&j| out[j].is_none()).collect();
         let cols: Vec<usize> = (0..live.len()).filter(|&i| !taken[i]).collect();
-        if rows.is_empty() || cols.is_empty() {
-            return out;
-        }
-        // Kuhn–Munkres maximises integer weights and wants no more rows than columns:
-        // the weight of a pair is how far inside the gate it is, in millimetres; pairs
-        // outside it weigh nothing and are not kept.
-        let weight = |j: usize, i: usize| -> i64 {
-            let d = distance(&live[i].1, seen[j].floor);
-            if d <= GATE_M {
-                ((GATE_M - d) * 1000.0) as i64 + 1
-            } else {
-                0
-            }
+        let places: Vec<[f32; 2]> = rows.iter().map(|&j| seen[j].floor).collect();
+        let tracks: Vec<[f32; 2]> = cols.iter().map(|&i| live[i].1.position).collect();
+        // A detection far off is placed less surely: the gate is at least three of its
+        // standard deviations wide.
+        let gate = |r: usize, c: usize| {
+            let unseen = tick.saturating_sub(live[cols[c]].0.last_seen) as f32;
+            GATE_M.max(3.0 * seen[rows[r]].sigma) + WALK_M_PER_TICK * unseen
         };
-        let (n_rows, n_cols, transposed) =
-            if rows.len() <= cols.len() { (rows.len(), cols.len(), false) } else { (cols.len(), rows.len(), true) };
-        let mut m = Matrix::new(n_rows, n_cols, 0i64);
-        for r in 0..n_rows {
-            for c in 0..n_cols {
-                let (j, i) = if transposed { (rows[c], cols[r]) } else { (rows[r], cols[c]) };
-                m[(r, c)] = weight(j, i);
-            }
-        }
-        let (_, assigned) = kuhn_munkres(&m);
-        for (r, c) in assigned.into_iter().enumerate() {
-            let (j, i) = if transposed { (rows[c], cols[r]) } else { (rows[r], cols[c]) };
-            if weight(j, i) > 0 {
-                out[j] = Some(live[i].0.id);
-            }
+        for (&j, a) in rows.iter().zip(nearest_within(&places, &tracks, gate)) {
+            out[j] = a.map(|c| live[cols[c]].0.id);
         }
         out
     }
@@ -128,6 +113,21 @@ impl People {
         self.people.iter().find(|p| p.id == id)?.track.estimate(tick)
     }
 
+    /// Every person tracked whom this robot saw within the last `within` ticks of
+    /// `tick`: (track id, where the track puts the person at `tick`).
+    pub fn seen_within(&self, tick: u64, within: u64) -> Vec<(u32, WorkerEstimate)> {
+        self.people
+            .iter()
+            .filter(|p| p.last_seen <= tick && tick - p.last_seen <= within)
+            .filter_map(|p| Some((p.id, p.track.estimate(tick)?)))
+            .collect()
+    }
+
+    /// Whether track `id` is still held.
+    pub fn holds(&self, id: u32) -> bool {
+        self.people.iter().any(|p| p.id == id)
+    }
+
     /// How many people are tracked.
     pub fn len(&self) -> usize {
         self.people.len()
@@ -136,6 +136,54 @@ impl People {
     pub fn is_empty(&self) -> bool {
         self.people.is_empty()
     }
+}
+
+/// Which of `to` each of `from` is, by least total distance, a pair never made farther
+/// apart than its gate (`gate(j, i)` for `from[j]` and `to[i]`, metres): the Hungarian
+/// method (`pathfinding`'s Kuhn–Munkres), each of `to` given at most once.
+pub(super) fn nearest_within(
+    from: &[[f32; 2]],
+    to: &[[f32; 2]],
+    gate: impl Fn(usize, usize) -> f32,
+) -> Vec<Option<usize>> {
+    let mut out = vec![None; from.len()];
+    if from.is_empty() || to.is_empty() {
+        return out;
+    }
+    // Kuhn–Munkres maximises integer weights and wants no more rows than columns: the
+    // weight of a pair is how much nearer than the widest gate it is, in millimetres
+    // (the same for every pair, so that a wide gate lets a pair be made but does not
+    // favour it); pairs outside their gate weigh nothing and are not kept.
+    let widest = (0..from.len())
+        .flat_map(|j| (0..to.len()).map(move |i| (j, i)))
+        .map(|(j, i)| gate(j, i))
+        .fold(0.0f32, f32::max);
+    let weight = |j: usize, i: usize| -> i64 {
+        let d = ((from[j][0] - to[i][0]).powi(2) + (from[j][1] - to[i][1]).powi(2)).sqrt();
+        if d <= gate(j, i) {
+            ((widest - d) * 1000.0) as i64 + 1
+        } else {
+            0
+        }
+    };
+    let transposed = from.len() > to.len();
+    let (n_rows, n_cols) = if transposed { (to.len(), from.len()) } else { (from.len(), to.len()) };
+    let pair = |r: usize, c: usize| if transposed { (c, r) } else { (r, c) };
+    let mut m = Matrix::new(n_rows, n_cols, 0i64);
+    for r in 0..n_rows {
+        for c in 0..n_cols {
+            let (j, i) = pair(r, c);
+            m[(r, c)] = weight(j, i);
+        }
+    }
+    let (_, assigned) = kuhn_munkres(&m);
+    for (r, c) in assigned.into_iter().enumerate() {
+        let (j, i) = pair(r, c);
+        if weight(j, i) > 0 {
+            out[j] = Some(i);
+        }
+    }
+    out
 }
 
 fn distance(e: &WorkerEstimate, z: [f32; 2]) -> f32 {

@@ -7,6 +7,7 @@
 //! The ego-GRU and the baselines run as [`Observers`] beside them.
 
 use super::bus::{Bus, Net};
+use super::identity::{IdentityTally, IdentityTracker};
 use super::observers::{Observers, Predictions};
 use super::planner::Planner;
 use super::score::{confuse, Confusion, Tally};
@@ -18,7 +19,7 @@ use spwi_core::engine::{Engine, EngineConfig, Input, Output};
 use spwi_core::floor::FloorPlan;
 use spwi_core::temporal::TemporalModel;
 use spwi_core::vote;
-use spwi_proto::{RobotId, Station, WorkerPhase, NUM_CLASSES};
+use spwi_proto::{PersonShare, RobotId, Station, WorkerPhase, NUM_CLASSES};
 use spwi_world::geometry::{norm, sub};
 use spwi_world::layout::Layout;
 use spwi_world::worker::route_bends;
@@ -94,6 +95,8 @@ pub struct Tallies {
     pub doubted_only_robot_ticks: u64,
     /// Of those, the ticks on which every live robot decided the same class for t.
     pub agreement: Agreement,
+    /// Whom the robots named which team worker, against the truth.
+    pub identity: IdentityTally,
     /// Ticks evaluated.
     pub ticks: u64,
     /// Robot frames processed.
@@ -164,6 +167,7 @@ impl Tallies {
         self.lone_stranger_robot_ticks += o.lone_stranger_robot_ticks;
         self.doubted_only_robot_ticks += o.doubted_only_robot_ticks;
         self.agreement += o.agreement;
+        self.identity.merge(&o.identity);
         self.ticks += o.ticks;
         self.frames += o.frames;
         self.messages += o.messages;
@@ -421,6 +425,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
     let mut intents: Vec<Station> = Vec::with_capacity(ticks + horizon);
     let mut ticks_on_goal = 0u64;
     let mut records = Vec::with_capacity(ticks);
+    let mut identity = IdentityTracker::new(n, world.workers.len());
     let mut tallies =
         Tallies { per_robot: vec![Default::default(); n], vote_trust: vec![(0.0, 0); n], ..Default::default() };
 
@@ -509,6 +514,15 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
         }
         tallies.messages += messages;
         tallies.bytes += bytes as u64;
+        // Whom each robot named which team worker this tick.
+        let named: Vec<Option<&[PersonShare]>> = (0..n)
+            .map(|slot| {
+                let (at, people) = bus.engine(slot).floor().worker_ids().shared();
+                (bus.is_live(slot) && at == tick).then_some(people)
+            })
+            .collect();
+        let truly: Vec<[f32; 2]> = world.workers.iter().map(|w| w.position).collect();
+        identity.tick(&truly, &named);
         let voted = votes.iter().any(Option::is_some);
         let mut per_robot = Vec::with_capacity(n);
         let mut decisions = Vec::with_capacity(n);
@@ -639,6 +653,7 @@ pub fn episode(o: &EvalOptions, layout: &Layout, episode_seed: u64) -> Result<Ta
             }
         }
     }
+    tallies.identity = identity.tally;
     for slot in (0..n).filter(|&s| bus.is_live(s)) {
         let m = bus.engine(slot).metrics();
         tallies.lone_stranger_robot_ticks += m.lone_stranger_ticks;

@@ -6,6 +6,7 @@
 //! - `bus.rs`: the engines' network (delay, loss, leaving robots), deadlines as polls;
 //! - `observers.rs`: the ego-GRU and the baselines; `cvm.rs`: the constant-velocity model;
 //! - `fleet.rs`: one episode — the world's frames in, the engines' votes and decisions scored;
+//!   `identity.rs`: whether the robots name each worker alike and keep the name;
 //! - `score.rs`: tallies, accuracies and their intervals; `studies.rs`: the runs of `--all`;
 //!   `page.rs`: docs/RESULTS.md from them, `figures.rs`: how a figure reads there,
 //!   `reading.rs`: that page's reading of the targets and of what bounds them;
@@ -25,6 +26,7 @@ pub mod command;
 pub mod cvm;
 mod figures;
 pub mod fleet;
+pub mod identity;
 pub mod observers;
 pub mod page;
 pub mod planner;
@@ -193,6 +195,8 @@ pub struct Report {
     pub per_robot: Vec<PerRobot>,
     /// Share of decided ticks on which every live robot decided the same class for t.
     pub agreement: f64,
+    /// Whether the robots name each worker alike and keep the name ([`identity`]).
+    pub identity: identity::Identity,
     /// Share of ticks on which the team had a decision (some robot saw the worker or,
     /// with a relation set, still tracked it).
     pub coverage: f64,
@@ -392,6 +396,7 @@ pub fn run(o: &EvalOptions) -> Result<Report> {
         long_walks,
         per_robot,
         agreement: all.agreement.share(),
+        identity: identity::Identity::of(&all.identity),
         coverage: all.decided_ticks as f64 / all.ticks.max(1) as f64,
         voted_undecided: all.voted_undecided_ticks as f64 / all.ticks.max(1) as f64,
         lone_stranger: all.lone_stranger_robot_ticks as f64 / (all.ticks * o.robots as u64).max(1) as f64,
@@ -584,6 +589,14 @@ pub fn print(r: &Report) {
         r.samples,
         r.seconds,
         r.per_frame_us
+    );
+    let id = &r.identity;
+    println!(
+        "  identity: the team's id for a worker switched {:.2} times per worker-minute ({:.2} per robot-minute); one id on {:.1}% of the worker-ticks two robots or more named ({:.1}% named)",
+        id.switches_per_worker_minute,
+        id.robot_switches_per_minute,
+        100.0 * id.same_id,
+        100.0 * id.named
     );
     println!(
         "  without a class though someone voted: {:.1}% of ticks (left so by the lone-voter rule {:.1}%, every voter doubted {:.1}% of robot-ticks)",

@@ -112,6 +112,7 @@ fn share(
         facing: None,
         landmarks: Vec::new(),
         verdict: None,
+        people: Vec::new(),
     }
 }
 

@@ -167,3 +167,26 @@ fn a_facing_set_reads_where_its_own_frame_shows_the_worker_facing() {
     let row = last_row(&a, 4);
     assert_eq!((row[KEYPOINT_VALUES], row[temporal::RELATION_ROW_DIM]), (1.0, 0.0));
 }
+
+#[test]
+fn robots_name_the_person_they_both_see_alike_and_one_without_a_pose_names_nobody() {
+    let set = models();
+    let (mut a, mut b) = (engine("a", &set), engine("b", &set));
+    a.handle(Input::MemberJoined(id("b")), ms(0));
+    b.handle(Input::MemberJoined(id("a")), ms(0));
+    let mut shared = Vec::new();
+    for t in 1..=4 {
+        let ea = take_embedding(&a.handle(Input::Frame(localised("a", t, true)), ms(100 * t)));
+        let eb = take_embedding(&b.handle(Input::Frame(localised("b", t, true)), ms(100 * t + 1)));
+        a.handle(Input::Embedding(eb.clone()), ms(100 * t + 2));
+        b.handle(Input::Embedding(ea.clone()), ms(100 * t + 2));
+        shared = vec![ea.people, eb.people];
+    }
+    // a, first of the members, named the person at once; b, second, took a's id.
+    assert_eq!(shared[0].len(), 1, "one person in view: {shared:?}");
+    assert_eq!(shared[0][0].worker, shared[1][0].worker, "b minted an id of its own");
+    assert_eq!(a.floor().worker_ids().shared().1, &shared[0][..]);
+    // Without a pose nobody is placed on the floor: nobody is named.
+    let e = take_embedding(&a.handle(Input::Frame(frame("a", 5, true)), ms(500)));
+    assert!(e.people.is_empty() && e.worker.is_none());
+}
