@@ -109,8 +109,17 @@ async fn status_metrics_and_health_are_served_while_deciding() {
         assert!(status["roster_version"].is_null(), "an open fleet holds no roster");
         assert_eq!(status["floor_plan"]["stations"], 1, "the plan it was given");
         assert!(status["floor_plan"]["contradicted"].is_array(), "{}", status["floor_plan"]);
-        // The scripted robot is localised and sees one person: named with a team id.
-        let people = status["people"].as_array().expect("people");
+        // The scripted robot is localised and sees one person, whom it names with a
+        // team id while the person's feet are in view (the script sweeps them across
+        // the image every 12.5 s; above the horizon nobody is placed on the floor).
+        let mut people = status["people"].as_array().expect("people").clone();
+        let sweep = Instant::now();
+        while people.is_empty() && sweep.elapsed() < Duration::from_secs(13) {
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            let (_, body) = tokio::task::spawn_blocking(move || get(addr, "/status")).await.unwrap();
+            let now: serde_json::Value = serde_json::from_str(&body).unwrap();
+            people = now["people"].as_array().expect("people").clone();
+        }
         assert_eq!(people.len(), 1, "{people:?}");
         let w = people[0]["worker"].as_u64().unwrap();
         assert_eq!(people[0]["name"], format!("w{:04x}", w & 0xffff));

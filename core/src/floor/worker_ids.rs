@@ -20,9 +20,11 @@
 //!   instance and the track — not at once, but after a wait that grows with the
 //!   robot's place among the members ([`MINT_STAGGER_TICKS`] each), so that robots
 //!   that see a newcomer together take the first one's id rather than each mint one;
+//!   for [`MERGE_TICKS`] after, a smaller id its peers place there (and no peer lists
+//!   beside it) replaces it, so two robots that minted at once agree within a tick;
 //! - two ids that name one person — their places within [`MERGE_M`] of each other (more
-//!   when they are unsure, up to [`MERGE_MAX_M`]) for
-//!   [`MERGE_TICKS`] ticks in a row, and no robot listing both at once — become one:
+//!   when they are unsure, up to [`MERGE_MAX_M`]) for [`MERGE_TICKS`] ticks in a row,
+//!   and no robot listing both at once — become one:
 //!   the id more robots name (a robot's fresh id yields to the one its team has used),
 //!   of two named alike the smaller. Two people side by side keep their ids as long
 //!   as one robot sees both.
@@ -34,7 +36,9 @@
 //!
 //! Only the peers whose word the robot fuses into its track of the worker name people
 //! here (the engine filters them): a robot it doubts, or whose feed repeats itself,
-//! cannot rename anyone.
+//! cannot rename anyone. An admitted robot that lies about people can still give a
+//! person an id of its choosing where it is the only one to name them, or delay a
+//! merge; ids are names only, and nothing is decided by them yet.
 
 use super::people::{nearest_within, People, WALK_M_PER_TICK};
 use crate::hash::Fnv1a;
@@ -93,6 +97,9 @@ pub struct WorkerIds {
     named: BTreeMap<u32, WorkerId>,
     /// Tracks nobody has named yet, since the tick they were first seen.
     unnamed: BTreeMap<u32, u64>,
+    /// Tracks this robot minted an id for, and when: for [`MERGE_TICKS`] the id yields
+    /// at once to a smaller one its peers place there.
+    minted: BTreeMap<u32, u64>,
     /// Pairs of ids (smaller first) whose people stood within [`MERGE_M`], and for how
     /// many ticks in a row.
     close: BTreeMap<(WorkerId, WorkerId), u32>,
@@ -110,6 +117,7 @@ impl WorkerIds {
     pub fn name(&mut self, tick: u64, me: Minter, people: &People, peers: &[Vec<PersonShare>]) -> Vec<PersonShare> {
         self.named.retain(|t, _| people.holds(*t));
         self.unnamed.retain(|t, _| people.holds(*t));
+        self.minted.retain(|t, at| people.holds(*t) && tick.saturating_sub(*at) < u64::from(MERGE_TICKS));
         let seen = people.seen_within(tick, SHARE_TICKS);
         let mine: Vec<PersonShare> =
             seen.iter().filter_map(|(t, e)| Some(PersonShare { worker: *self.named.get(t)?, estimate: *e })).collect();
@@ -124,6 +132,7 @@ impl WorkerIds {
             if tick - since >= me.rank as u64 * MINT_STAGGER_TICKS {
                 self.unnamed.remove(t);
                 self.named.insert(*t, me.mint(*t));
+                self.minted.insert(*t, tick);
             }
         }
         let shared: Vec<PersonShare> = seen
@@ -155,11 +164,7 @@ impl WorkerIds {
     fn merge(&mut self, mine: &[PersonShare], peers: &[Vec<PersonShare>]) {
         let lists: Vec<&[PersonShare]> = std::iter::once(mine).chain(peers.iter().map(Vec::as_slice)).collect();
         let places = places(&lists);
-        let listed_together: BTreeSet<(WorkerId, WorkerId)> = lists
-            .iter()
-            .flat_map(|l| l.iter().flat_map(move |a| l.iter().map(move |b| (a.worker, b.worker))))
-            .filter(|(a, b)| a < b)
-            .collect();
+        let listed_together = listed_together(&lists);
         let mut close = BTreeMap::new();
         for (i, a) in places.iter().enumerate() {
             for b in &places[i + 1..] {
@@ -198,9 +203,13 @@ impl WorkerIds {
         }
     }
 
-    /// Gives each of this robot's unnamed tracks the id its peers place there, if any.
+    /// Gives each of this robot's unnamed tracks the id its peers place there, if any;
+    /// and each track whose id it minted lately a smaller id its peers place there (two
+    /// robots that minted for one person at once agree within a tick or two, rather
+    /// than after [`MERGE_TICKS`]).
     fn adopt(&mut self, seen: &[(u32, WorkerEstimate)], peers: &[Vec<PersonShare>]) {
-        let new: Vec<&(u32, WorkerEstimate)> = seen.iter().filter(|(t, _)| !self.named.contains_key(t)).collect();
+        let new: Vec<&(u32, WorkerEstimate)> =
+            seen.iter().filter(|(t, _)| !self.named.contains_key(t) || self.minted.contains_key(t)).collect();
         if new.is_empty() {
             return;
         }
@@ -209,7 +218,13 @@ impl WorkerIds {
         let free: Vec<Place> = places(&lists).into_iter().filter(|p| !held.contains(&p.id)).collect();
         let from: Vec<[f32; 2]> = new.iter().map(|(_, e)| e.position).collect();
         let to: Vec<[f32; 2]> = free.iter().map(|p| p.at).collect();
-        let reach = |j: usize, i: usize| gate(3.0, new[j].1.covariance[0] + free[i].var, ADOPT_M, ADOPT_MAX_M);
+        // Only a smaller id replaces a young one, and only one no peer lists beside it
+        // (a peer that lists both sees two people).
+        let apart = listed_together(&lists);
+        let reach = |j: usize, i: usize| match self.named.get(&new[j].0) {
+            Some(&young) if free[i].id > young || apart.contains(&(free[i].id, young)) => -1.0,
+            _ => gate(3.0, new[j].1.covariance[0] + free[i].var, ADOPT_M, ADOPT_MAX_M),
+        };
         for ((t, _), a) in new.iter().zip(nearest_within(&from, &to, reach)) {
             if let Some(i) = a {
                 self.give(*t, free[i].id);
@@ -252,6 +267,7 @@ impl WorkerIds {
         self.named.retain(|_, w| *w != id);
         self.named.insert(track, id);
         self.unnamed.remove(&track);
+        self.minted.remove(&track);
     }
 }
 
@@ -275,6 +291,15 @@ fn places(lists: &[&[PersonShare]]) -> Vec<Place> {
         s.2 = s.2.min(p.estimate.covariance[0]);
     }
     sum.into_iter().map(|(id, (p, n, var))| Place { id, at: [p[0] / n, p[1] / n], var }).collect()
+}
+
+/// The pairs of ids some list names both of (smaller first): two people.
+fn listed_together(lists: &[&[PersonShare]]) -> BTreeSet<(WorkerId, WorkerId)> {
+    lists
+        .iter()
+        .flat_map(|l| l.iter().flat_map(move |a| l.iter().map(move |b| (a.worker, b.worker))))
+        .filter(|(a, b)| a < b)
+        .collect()
 }
 
 /// How far apart two places of one person may be, given how surely each is placed:
@@ -369,21 +394,43 @@ mod tests {
     }
 
     #[test]
-    fn two_ids_minted_for_one_person_become_the_smaller_on_every_robot() {
+    fn two_ids_minted_for_one_person_at_once_become_the_smaller_within_two_ticks() {
         // a and b see the person while their messages are lost: each mints an id.
-        // Once they hear each other, a second later, both use the smaller.
         let mut robots = [Robot::new("a"), Robot::new("b")];
         let at = [2.0, 2.0];
-        for t in 0..5 {
+        for t in 0..4 {
             tick_heard(&mut robots, t, &[vec![at], vec![at]], false);
         }
         let (ia, ib) = (robots[0].id_at(at).unwrap(), robots[1].id_at(at).unwrap());
         assert_ne!(ia, ib);
-        for t in 5..5 + MERGE_TICKS as u64 + 2 {
+        // Young ids yield to a smaller one at once.
+        for t in 4..6 {
             tick(&mut robots, t, &[vec![at], vec![at]]);
         }
-        let smaller = ia.min(ib);
-        assert_eq!((robots[0].id_at(at), robots[1].id_at(at)), (Some(smaller), Some(smaller)));
+        let smaller = Some(ia.min(ib));
+        assert_eq!((robots[0].id_at(at), robots[1].id_at(at)), (smaller, smaller));
+    }
+
+    #[test]
+    fn two_ids_that_stand_together_for_a_second_become_one_on_every_robot() {
+        // Unheard for longer than an id stays young: the ids are settled, and become
+        // one only after standing together for MERGE_TICKS.
+        let mut robots = [Robot::new("a"), Robot::new("b")];
+        let at = [2.0, 2.0];
+        let quiet = MERGE_TICKS as u64 + 5;
+        for t in 0..quiet {
+            tick_heard(&mut robots, t, &[vec![at], vec![at]], false);
+        }
+        let (ia, ib) = (robots[0].id_at(at).unwrap(), robots[1].id_at(at).unwrap());
+        for t in quiet..quiet + 3 {
+            tick(&mut robots, t, &[vec![at], vec![at]]);
+        }
+        assert_eq!((robots[0].id_at(at), robots[1].id_at(at)), (Some(ia), Some(ib)), "settled ids wait");
+        for t in quiet + 3..quiet + MERGE_TICKS as u64 + 2 {
+            tick(&mut robots, t, &[vec![at], vec![at]]);
+        }
+        let smaller = Some(ia.min(ib));
+        assert_eq!((robots[0].id_at(at), robots[1].id_at(at)), (smaller, smaller));
     }
 
     #[test]

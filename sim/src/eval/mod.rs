@@ -658,6 +658,19 @@ mod tests {
     }
 
     #[test]
+    fn the_robots_name_two_workers_alike_and_keep_their_names() {
+        // Two workers, three robots with cameras that track, 6 s each: every robot's
+        // person under the team's ids, scored against where the workers truly stand.
+        let mut o = EvalOptions { workers: 2, ticks: 60, ..options(fixture(), Faults::none()) };
+        o.floors[0].layout.camera.policy = spwi_world::layout::CameraPolicy::Track;
+        let r = run(&o).unwrap();
+        let id = r.identity;
+        assert!(id.named > 0.5, "the robots named the workers on few ticks: {id:?}");
+        assert!(id.same_id > 0.9, "robots named one worker differently: {id:?}");
+        assert!(id.switches_per_worker_minute < 3.0, "ids changed often: {id:?}");
+    }
+
+    #[test]
     fn the_paired_figures_score_the_collective_and_the_consensus_on_the_same_robot_ticks() {
         let episodes = run_episodes(&options(fixture(), Faults::none())).unwrap();
         let total: u64 = episodes.iter().map(|e| e.paired_collective.samples()).sum();
