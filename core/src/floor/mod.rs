@@ -8,8 +8,7 @@
 //! ([`track`]) whose estimate the robots share and fuse, everyone else in view is
 //! tracked too so that the worker followed stays the same person ([`people`]) and
 //! named with ids every robot of the team gives alike ([`worker_ids`]), the
-//! station objects seen by
-//! any robot build a shared map ([`stations`]), and the temporal model reads the
+//! station objects seen by any robot build a shared map ([`stations`]), and the temporal model reads the
 //! worker's relation to every mapped station ([`relations`]) — distance, bearing
 //! relative to the worker's motion, closing speed — never where a station stands.
 //!
@@ -22,7 +21,6 @@ pub mod people;
 pub mod plan;
 pub mod relations;
 pub mod stations;
-
 pub mod track;
 pub mod worker_ids;
 
