@@ -223,16 +223,16 @@ impl Engine {
     }
 
     /// Names the people we track at `t` with the team's ids (`floor/worker_ids.rs`),
-    /// from the lists of the peers whose word on the worker we fuse, predicted to `t`.
+    /// from our peers' latest lists, predicted to `t` (a stale peer's list is empty;
+    /// trust does not filter them: `worker_ids.rs` says why).
     fn name_people(&mut self, t: u64) -> Vec<PersonShare> {
-        let trust = &self.trust;
-        let peers: Vec<Vec<PersonShare>> = self
+        let peers: Vec<floor::PeerList> = self
             .peer_views
             .iter()
-            .filter(|(r, v)| v.tick <= t && t - v.tick <= PEER_VIEW_TICKS && trust.fuses(r))
-            .map(|(_, v)| {
+            .filter(|(_, v)| v.tick <= t && t - v.tick <= PEER_VIEW_TICKS)
+            .map(|(robot, v)| {
                 let ahead = |p: &PersonShare| PersonShare { estimate: floor::predict(&p.estimate, t - v.tick), ..*p };
-                v.people.iter().map(ahead).collect()
+                floor::PeerList { robot, people: v.people.iter().map(ahead).collect() }
             })
             .collect();
         let rank = self.live.iter().filter(|r| **r < self.cfg.robot).count();

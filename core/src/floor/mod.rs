@@ -30,7 +30,7 @@ pub use plan::{FloorPlan, PlannedObstacle, PlannedStation};
 pub use relations::{facing, fuse_facings, peer_set, relations, FACING_DIM, RELATION_DIM};
 pub use stations::StationMap;
 pub use track::{agrees_with_most, fuse, held_at, predict, sightings, team_worker, Sighting, TeamWorker, Track};
-pub use worker_ids::{Minter, WorkerIds};
+pub use worker_ids::{Minter, PeerList, WorkerIds};
 
 use spwi_proto::{DetectionFrame, HumanDetection, Landmark, PersonShare, WorkerEstimate};
 
@@ -163,7 +163,7 @@ impl FloorView {
     /// Names everyone this robot tracks at `tick` with the team's ids, from its peers'
     /// lists predicted to `tick` ([`worker_ids`]): what it shares of them. Called
     /// after [`FloorView::observe`] took in a frame with a pose.
-    pub fn name_people(&mut self, tick: u64, me: Minter, peers: &[Vec<PersonShare>]) -> Vec<PersonShare> {
+    pub fn name_people(&mut self, tick: u64, me: Minter, peers: &[PeerList]) -> Vec<PersonShare> {
         self.names.name(tick, me, &self.people, peers)
     }
 

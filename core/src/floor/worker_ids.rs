@@ -20,25 +20,31 @@
 //!   instance and the track — not at once, but after a wait that grows with the
 //!   robot's place among the members ([`MINT_STAGGER_TICKS`] each), so that robots
 //!   that see a newcomer together take the first one's id rather than each mint one;
-//!   for [`MERGE_TICKS`] after, a smaller id its peers place there (and no peer lists
+//!   for [`YOUNG_TICKS`] after, a smaller id its peers place there (and no peer lists
 //!   beside it) replaces it, so two robots that minted at once agree within a tick;
-//! - two ids that name one person — their places within [`MERGE_M`] of each other (more
-//!   when they are unsure, up to [`MERGE_MAX_M`]) for [`MERGE_TICKS`] ticks in a row,
-//!   and no robot listing both at once — become one:
-//!   the id more robots name (a robot's fresh id yields to the one its team has used),
-//!   of two named alike the smaller. Two people side by side keep their ids as long
-//!   as one robot sees both.
+//! - a track the team names otherwise takes the team's name: each robot that places
+//!   someone there has a word on who it is (a peer, the id its list gives the track by
+//!   least total distance over the robot's tracks), the id most robots give wins, of
+//!   ids given by as many the one the first-ranked robot gives; after
+//!   [`CONFORM_TICKS`] ticks in a row against it, a robot renames its track, and a
+//!   track of its own that held the new id takes the old one. So two people whom one
+//!   robot's tracker swapped where they crossed are swapped back, and two ids that two
+//!   robots gave one person become one, within a third of a second. Two people side by
+//!   side keep their ids as long as one robot sees both (its list gives them apart).
 //!
 //! A person whom two robots' tracks confused and who then steps away is handed over
 //! the same way: the track that follows them on keeps its id, the other one is new
 //! and takes the id its peers give that person, or a fresh one. A robot that leaves
 //! takes nothing with it: its ids live on in its peers' tracks.
 //!
-//! Only the peers whose word the robot fuses into its track of the worker name people
-//! here (the engine filters them): a robot it doubts, or whose feed repeats itself,
-//! cannot rename anyone. An admitted robot that lies about people can still give a
-//! person an id of its choosing where it is the only one to name them, or delay a
-//! merge; ids are names only, and nothing is decided by them yet.
+//! Every peer whose feed does not repeat itself names people here (the engine leaves
+//! out the others); the trust votes earn does not filter them, since with several
+//! workers two honest robots following different people disagree on votes while they
+//! place everyone alike, and a robot that doubted its peers this way forgot where they
+//! last placed a worker it lost. An admitted robot that lies about people can give a
+//! person an id of its choosing where it is the only one to name them, and wins a tie
+//! of words where it ranks first; it cannot outvote two honest robots. Ids are names
+//! only, and nothing is decided by them yet.
 
 use super::people::{nearest_within, People, WALK_M_PER_TICK};
 use crate::hash::Fnv1a;
@@ -51,14 +57,9 @@ use std::collections::{BTreeMap, BTreeSet};
 /// surely).
 pub const ADOPT_M: f32 = 1.0;
 pub const ADOPT_MAX_M: f32 = 2.5;
-/// How close two ids' people stand, metres, to be one person: two standard deviations
-/// of the places' difference, at least [`MERGE_M`] and at most [`MERGE_MAX_M`] (two
-/// workers side by side at a station stand a metre apart or more).
-pub const MERGE_M: f32 = 0.5;
-pub const MERGE_MAX_M: f32 = 0.9;
-/// For how many ticks in a row two ids' people must stand that close (1 s: people who
-/// pass each other do not stay within half a metre for a second).
-pub const MERGE_TICKS: u32 = 10;
+/// For how many ticks a freshly minted id yields at once to a smaller one its peers
+/// place there (1 s).
+pub const YOUNG_TICKS: u32 = 10;
 /// How many ticks longer each robot, by its place among the members, waits before it
 /// mints an id for a person nobody names: one tick for a peer's share to arrive, one
 /// to spare.
@@ -67,9 +68,20 @@ pub const MINT_STAGGER_TICKS: u64 = 2;
 /// farthest from where it was last placed that it is taken, metres.
 pub const RECALL_TICKS: u64 = 100;
 pub const RECALL_M: f32 = 4.0;
+/// For how many ticks in a row the team must name one of a robot's tracks otherwise
+/// before the robot takes the team's name for it (0.3 s: a person placed between two
+/// others for a tick or two does not change names).
+pub const CONFORM_TICKS: u32 = 3;
 /// A robot shares the people it saw within the last half second; a track kept longer
 /// on prediction alone keeps its id but is not shared.
 pub const SHARE_TICKS: u64 = 5;
+
+/// One peer's latest list of the people it tracks, predicted to the tick named.
+#[derive(Debug, Clone)]
+pub struct PeerList<'a> {
+    pub robot: &'a RobotId,
+    pub people: Vec<PersonShare>,
+}
 
 /// Who is minting: this robot, its instance, and its place among the live members.
 #[derive(Debug, Clone, Copy)]
@@ -97,12 +109,11 @@ pub struct WorkerIds {
     named: BTreeMap<u32, WorkerId>,
     /// Tracks nobody has named yet, since the tick they were first seen.
     unnamed: BTreeMap<u32, u64>,
-    /// Tracks this robot minted an id for, and when: for [`MERGE_TICKS`] the id yields
+    /// Tracks this robot minted an id for, and when: for [`YOUNG_TICKS`] the id yields
     /// at once to a smaller one its peers place there.
     minted: BTreeMap<u32, u64>,
-    /// Pairs of ids (smaller first) whose people stood within [`MERGE_M`], and for how
-    /// many ticks in a row.
-    close: BTreeMap<(WorkerId, WorkerId), u32>,
+    /// Tracks the team names otherwise: the id it gives, for how many ticks in a row.
+    contradicted: BTreeMap<u32, (WorkerId, u32)>,
     /// What the robot last shared, and of which tick.
     shared: (u64, Vec<PersonShare>),
     /// Where each id named in the last [`RECALL_TICKS`] was last placed, and when.
@@ -114,14 +125,15 @@ impl WorkerIds {
     /// latest list, predicted to `tick`. Returns what this robot shares: each person it
     /// saw within [`SHARE_TICKS`] and has named, with its estimate (at most
     /// [`MAX_HUMANS`]).
-    pub fn name(&mut self, tick: u64, me: Minter, people: &People, peers: &[Vec<PersonShare>]) -> Vec<PersonShare> {
+    pub fn name(&mut self, tick: u64, me: Minter, people: &People, peers: &[PeerList]) -> Vec<PersonShare> {
         self.named.retain(|t, _| people.holds(*t));
+        self.contradicted.retain(|t, _| people.holds(*t));
         self.unnamed.retain(|t, _| people.holds(*t));
-        self.minted.retain(|t, at| people.holds(*t) && tick.saturating_sub(*at) < u64::from(MERGE_TICKS));
+        self.minted.retain(|t, at| people.holds(*t) && tick.saturating_sub(*at) < u64::from(YOUNG_TICKS));
         let seen = people.seen_within(tick, SHARE_TICKS);
-        let mine: Vec<PersonShare> =
-            seen.iter().filter_map(|(t, e)| Some(PersonShare { worker: *self.named.get(t)?, estimate: *e })).collect();
-        self.merge(&mine, peers);
+        self.conform(&seen, me.robot, peers);
+        let peers: Vec<&[PersonShare]> = peers.iter().map(|p| p.people.as_slice()).collect();
+        let peers = &peers[..];
         self.adopt(&seen, peers);
         self.recall(tick, &seen, peers);
         for (t, _) in &seen {
@@ -141,7 +153,7 @@ impl WorkerIds {
             .take(MAX_HUMANS)
             .collect();
         self.shared = (tick, shared.clone());
-        let lists: Vec<&[PersonShare]> = std::iter::once(&shared[..]).chain(peers.iter().map(Vec::as_slice)).collect();
+        let lists: Vec<&[PersonShare]> = std::iter::once(&shared[..]).chain(peers.iter().copied()).collect();
         for p in places(&lists) {
             self.recent.insert(p.id, (tick, p.at));
         }
@@ -159,68 +171,23 @@ impl WorkerIds {
         self.named.get(&track).copied()
     }
 
-    /// Counts the ticks each pair of ids has stood together, and renames this robot's
-    /// tracks under an id that has stood long enough beside a smaller one.
-    fn merge(&mut self, mine: &[PersonShare], peers: &[Vec<PersonShare>]) {
-        let lists: Vec<&[PersonShare]> = std::iter::once(mine).chain(peers.iter().map(Vec::as_slice)).collect();
-        let places = places(&lists);
-        let listed_together = listed_together(&lists);
-        let mut close = BTreeMap::new();
-        for (i, a) in places.iter().enumerate() {
-            for b in &places[i + 1..] {
-                let near = distance(a.at, b.at) <= gate(2.0, a.var + b.var, MERGE_M, MERGE_MAX_M);
-                if near && !listed_together.contains(&(a.id, b.id)) {
-                    close.insert((a.id, b.id), self.close.get(&(a.id, b.id)).copied().unwrap_or(0) + 1);
-                }
-            }
-        }
-        self.close = close;
-        // Of two ids that stood together long enough, the one more robots name stays
-        // (a robot's fresh id yields to the one its team has used), else the smaller.
-        let naming = |id: WorkerId| lists.iter().filter(|l| l.iter().any(|p| p.worker == id)).count();
-        let mut into: BTreeMap<WorkerId, WorkerId> = BTreeMap::new();
-        let settled = |into: &BTreeMap<WorkerId, WorkerId>, mut id: WorkerId| {
-            while let Some(&to) = into.get(&id) {
-                id = to;
-            }
-            id
-        };
-        for (&(a, b), &n) in &self.close {
-            if n >= MERGE_TICKS {
-                let (gone, kept) = if naming(b) > naming(a) { (a, b) } else { (b, a) };
-                let (gone, kept) = (settled(&into, gone), settled(&into, kept));
-                if gone != kept {
-                    into.insert(gone, kept);
-                }
-            }
-        }
-        let held: BTreeSet<WorkerId> = self.named.values().copied().collect();
-        for id in self.named.values_mut() {
-            let to = settled(&into, *id);
-            if to != *id && !held.contains(&to) {
-                *id = to;
-            }
-        }
-    }
-
     /// Gives each of this robot's unnamed tracks the id its peers place there, if any;
     /// and each track whose id it minted lately a smaller id its peers place there (two
     /// robots that minted for one person at once agree within a tick or two, rather
-    /// than after [`MERGE_TICKS`]).
-    fn adopt(&mut self, seen: &[(u32, WorkerEstimate)], peers: &[Vec<PersonShare>]) {
+    /// than after [`YOUNG_TICKS`]).
+    fn adopt(&mut self, seen: &[(u32, WorkerEstimate)], peers: &[&[PersonShare]]) {
         let new: Vec<&(u32, WorkerEstimate)> =
             seen.iter().filter(|(t, _)| !self.named.contains_key(t) || self.minted.contains_key(t)).collect();
         if new.is_empty() {
             return;
         }
         let held = self.held_by(seen);
-        let lists: Vec<&[PersonShare]> = peers.iter().map(Vec::as_slice).collect();
-        let free: Vec<Place> = places(&lists).into_iter().filter(|p| !held.contains(&p.id)).collect();
+        let free: Vec<Place> = places(peers).into_iter().filter(|p| !held.contains(&p.id)).collect();
         let from: Vec<[f32; 2]> = new.iter().map(|(_, e)| e.position).collect();
         let to: Vec<[f32; 2]> = free.iter().map(|p| p.at).collect();
         // Only a smaller id replaces a young one, and only one no peer lists beside it
         // (a peer that lists both sees two people).
-        let apart = listed_together(&lists);
+        let apart = listed_together(peers);
         let reach = |j: usize, i: usize| match self.named.get(&new[j].0) {
             Some(&young) if free[i].id > young || apart.contains(&(free[i].id, young)) => -1.0,
             _ => gate(3.0, new[j].1.covariance[0] + free[i].var, ADOPT_M, ADOPT_MAX_M),
@@ -236,13 +203,13 @@ impl WorkerIds {
 impl WorkerIds {
     /// Gives each of this robot's tracks still unnamed an id nobody names now, if one
     /// was last placed near enough for the person to have walked here since.
-    fn recall(&mut self, tick: u64, seen: &[(u32, WorkerEstimate)], peers: &[Vec<PersonShare>]) {
+    fn recall(&mut self, tick: u64, seen: &[(u32, WorkerEstimate)], peers: &[&[PersonShare]]) {
         let new: Vec<&(u32, WorkerEstimate)> = seen.iter().filter(|(t, _)| !self.named.contains_key(t)).collect();
         if new.is_empty() {
             return;
         }
         let mut named_now = self.held_by(seen);
-        named_now.extend(peers.iter().flatten().map(|p| p.worker));
+        named_now.extend(peers.iter().flat_map(|l| l.iter()).map(|p| p.worker));
         let gone: Vec<(WorkerId, u64, [f32; 2])> =
             self.recent.iter().filter(|(id, _)| !named_now.contains(id)).map(|(id, (t, at))| (*id, *t, *at)).collect();
         let from: Vec<[f32; 2]> = new.iter().map(|(_, e)| e.position).collect();
@@ -253,6 +220,59 @@ impl WorkerIds {
             if let Some(i) = a {
                 self.give(*t, gone[i].0);
             }
+        }
+    }
+
+    /// Takes the team's name for each of this robot's tracks that the team has named
+    /// otherwise for [`CONFORM_TICKS`] ticks in a row. Each robot that places someone
+    /// where the track is has a word on who it is: this robot its own id, a peer the id
+    /// it lists there — the track's id if it lists that one within the gate, else the
+    /// one its list gives the track by least total distance over this robot's tracks.
+    /// The id most robots give wins; of ids given by as many, the one the first-ranked
+    /// robot gives (robots ranked by id). A track renamed to an id another track of
+    /// ours holds hands that track its old id: two people swapped on one robot's
+    /// tracks are swapped back.
+    fn conform(&mut self, seen: &[(u32, WorkerEstimate)], me: &RobotId, peers: &[PeerList]) {
+        let mine: Vec<(u32, WorkerId, WorkerEstimate)> =
+            seen.iter().filter_map(|(t, e)| Some((*t, *self.named.get(t)?, *e))).collect();
+        let reach = |e: &WorkerEstimate, p: &PersonShare| {
+            gate(3.0, e.covariance[0] + p.estimate.covariance[0], ADOPT_M, ADOPT_MAX_M)
+        };
+        // Each robot's word on each of our tracks: (robot, id), ours first.
+        let mut words: Vec<Vec<(&RobotId, WorkerId)>> = mine.iter().map(|&(_, id, _)| vec![(me, id)]).collect();
+        let from: Vec<[f32; 2]> = mine.iter().map(|(_, _, e)| e.position).collect();
+        for peer in peers {
+            let to: Vec<[f32; 2]> = peer.people.iter().map(|p| p.estimate.position).collect();
+            let given = nearest_within(&from, &to, |j, i| reach(&mine[j].2, &peer.people[i]));
+            for (j, word) in given.into_iter().enumerate() {
+                words[j].extend(word.map(|i| (peer.robot, peer.people[i].worker)));
+            }
+        }
+        let mut renames = Vec::new();
+        for (&(t, id, _), words) in mine.iter().zip(&words) {
+            let team = team_word(words);
+            if team == id {
+                self.contradicted.remove(&t);
+                continue;
+            }
+            let streak = match self.contradicted.get(&t) {
+                Some(&(w, n)) if w == team => n + 1,
+                _ => 1,
+            };
+            self.contradicted.insert(t, (team, streak));
+            if streak >= CONFORM_TICKS {
+                renames.push((t, team));
+            }
+        }
+        for (t, to) in renames {
+            let Some(&from) = self.named.get(&t) else { continue };
+            if let Some((&other, _)) = self.named.iter().find(|(_, w)| **w == to) {
+                self.named.insert(other, from);
+                self.contradicted.remove(&other);
+            }
+            self.named.insert(t, to);
+            self.contradicted.remove(&t);
+            self.minted.remove(&t);
         }
     }
 
@@ -269,6 +289,19 @@ impl WorkerIds {
         self.unnamed.remove(&track);
         self.minted.remove(&track);
     }
+}
+
+/// The id most of `words` give; of ids given by as many, the one the first-ranked robot
+/// giving any of them gives.
+fn team_word(words: &[(&RobotId, WorkerId)]) -> WorkerId {
+    let mut count: BTreeMap<WorkerId, (usize, &RobotId)> = BTreeMap::new();
+    for &(robot, id) in words {
+        let c = count.entry(id).or_insert((0, robot));
+        c.0 += 1;
+        c.1 = c.1.min(robot);
+    }
+    let best = count.iter().max_by(|a, b| a.1 .0.cmp(&b.1 .0).then_with(|| b.1 .1.cmp(a.1 .1)));
+    *best.expect("a robot's own word at least").0
 }
 
 /// Where the lists place one id: on average, and how surely (the position variance of
@@ -308,14 +341,14 @@ fn gate(k: f32, var: f32, least: f32, most: f32) -> f32 {
     (k * var.sqrt()).clamp(least, most)
 }
 
-fn distance(a: [f32; 2], b: [f32; 2]) -> f32 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
-}
-
 #[cfg(test)]
 mod tests {
     use super::super::people::Seen;
     use super::*;
+
+    fn distance(a: [f32; 2], b: [f32; 2]) -> f32 {
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+    }
 
     /// One robot of a simulated team: its tracks and its names for them.
     struct Robot {
@@ -356,15 +389,20 @@ mod tests {
 
     /// [`tick`], the robots hearing each other (`heard`) or not.
     fn tick_heard(robots: &mut [Robot], t: u64, sees: &[Vec<[f32; 2]>], heard: bool) {
-        let before: Vec<Vec<PersonShare>> = robots.iter().map(|r| r.shared.clone()).collect();
+        let before: Vec<(RobotId, Vec<PersonShare>)> =
+            robots.iter().map(|r| (r.id.clone(), r.shared.clone())).collect();
         let mut ranks: Vec<&RobotId> = robots.iter().map(|r| &r.id).collect();
         ranks.sort();
         let ranks: Vec<usize> = robots.iter().map(|r| ranks.iter().position(|x| **x == r.id).unwrap()).collect();
         for (i, r) in robots.iter_mut().enumerate() {
             let places: Vec<Seen> = sees[i].iter().map(|&p| seen(p)).collect();
             r.people.observe(t, &places);
-            let peers: Vec<Vec<PersonShare>> =
-                before.iter().enumerate().filter(|(j, _)| heard && *j != i).map(|(_, l)| l.clone()).collect();
+            let peers: Vec<PeerList> = before
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| heard && *j != i)
+                .map(|(_, (robot, people))| PeerList { robot, people: people.clone() })
+                .collect();
             let me = Minter { robot: &r.id, instance: 1, rank: ranks[i] };
             r.shared = r.team.name(t, me, &r.people, &peers);
         }
@@ -412,30 +450,29 @@ mod tests {
     }
 
     #[test]
-    fn two_ids_that_stand_together_for_a_second_become_one_on_every_robot() {
+    fn two_settled_ids_for_one_person_become_the_first_ranked_robots_on_every_robot() {
         // Unheard for longer than an id stays young: the ids are settled, and become
-        // one only after standing together for MERGE_TICKS.
+        // one only after CONFORM_TICKS ticks of words against one of them.
         let mut robots = [Robot::new("a"), Robot::new("b")];
         let at = [2.0, 2.0];
-        let quiet = MERGE_TICKS as u64 + 5;
+        let quiet = u64::from(YOUNG_TICKS) + 5;
         for t in 0..quiet {
             tick_heard(&mut robots, t, &[vec![at], vec![at]], false);
         }
         let (ia, ib) = (robots[0].id_at(at).unwrap(), robots[1].id_at(at).unwrap());
-        for t in quiet..quiet + 3 {
+        assert_ne!(ia, ib);
+        let heard = quiet + u64::from(CONFORM_TICKS) - 1;
+        for t in quiet..heard {
             tick(&mut robots, t, &[vec![at], vec![at]]);
         }
         assert_eq!((robots[0].id_at(at), robots[1].id_at(at)), (Some(ia), Some(ib)), "settled ids wait");
-        for t in quiet + 3..quiet + MERGE_TICKS as u64 + 2 {
-            tick(&mut robots, t, &[vec![at], vec![at]]);
-        }
-        let smaller = Some(ia.min(ib));
-        assert_eq!((robots[0].id_at(at), robots[1].id_at(at)), (smaller, smaller));
+        tick(&mut robots, heard, &[vec![at], vec![at]]);
+        assert_eq!((robots[0].id_at(at), robots[1].id_at(at)), (Some(ia), Some(ia)), "b took a's id");
     }
 
     #[test]
     fn two_people_side_by_side_keep_their_ids_while_one_robot_sees_both() {
-        // p and q stand 0.4 m apart, closer than MERGE_M: a sees both, b only q, c
+        // p and q stand 0.4 m apart: a sees both, b only q, c
         // only p (so whichever id is the larger, one robot alone holds it).
         let mut robots = [Robot::new("a"), Robot::new("b"), Robot::new("c")];
         let (p, q) = ([3.0, 0.0], [3.0, 0.4]);
@@ -445,6 +482,62 @@ mod tests {
         let (ip, iq) = (robots[0].id_at(p), robots[0].id_at(q));
         assert_ne!(ip, iq, "a merged the two people it sees");
         assert_eq!((robots[1].id_at(q), robots[2].id_at(p)), (iq, ip), "b and c name them as a does");
+    }
+
+    /// Swaps the names of the two people robot `r` sees nearest `p` and `q`, as its own
+    /// tracker would when they cross close to its camera.
+    fn swap_names(r: &mut Robot, p: [f32; 2], q: [f32; 2]) {
+        let (ip, iq) = (r.id_at(p).unwrap(), r.id_at(q).unwrap());
+        for id in r.team.named.values_mut() {
+            if *id == ip {
+                *id = iq;
+            } else if *id == iq {
+                *id = ip;
+            }
+        }
+    }
+
+    #[test]
+    fn a_robot_whose_tracks_swapped_two_people_takes_the_teams_names_back() {
+        let mut robots = [Robot::new("a"), Robot::new("b"), Robot::new("c")];
+        let (p, q) = ([2.0, 0.0], [2.0, 3.0]);
+        let both = || vec![p, q];
+        for t in 0..20 {
+            tick(&mut robots, t, &[both(), both(), both()]);
+        }
+        let names = |r: &Robot| (r.id_at(p), r.id_at(q));
+        let team = names(&robots[0]);
+        // a, ranked first, swaps: the other two outnumber it, and it takes their names.
+        swap_names(&mut robots[0], p, q);
+        for t in 20..20 + u64::from(CONFORM_TICKS) {
+            tick(&mut robots, t, &[both(), both(), both()]);
+            assert!(robots[1..].iter().all(|r| names(r) == team), "tick {t}: the others kept their names");
+            if t == 20 {
+                assert_eq!(names(&robots[0]), (team.1, team.0), "a shares the swapped names at first");
+            }
+        }
+        assert_eq!(names(&robots[0]), team, "a took the team's names back");
+    }
+
+    #[test]
+    fn of_two_robots_that_name_two_people_crosswise_the_second_ranked_takes_the_firsts_names() {
+        let mut robots = [Robot::new("a"), Robot::new("b")];
+        let (p, q) = ([2.0, 0.0], [2.0, 3.0]);
+        let both = || vec![p, q];
+        for t in 0..20 {
+            tick(&mut robots, t, &[both(), both()]);
+        }
+        let names = |r: &Robot| (r.id_at(p), r.id_at(q));
+        let team = names(&robots[0]);
+        swap_names(&mut robots[1], p, q);
+        for t in 20..20 + u64::from(CONFORM_TICKS) + 2 {
+            tick(&mut robots, t, &[both(), both()]);
+            assert_eq!(names(&robots[0]), team, "tick {t}: a, ranked first, keeps its names");
+            if t == 20 {
+                assert_eq!(names(&robots[1]), (team.1, team.0), "b shares the swapped names at first");
+            }
+        }
+        assert_eq!(names(&robots[1]), team, "b took a's names");
     }
 
     #[test]
