@@ -541,6 +541,26 @@ mod tests {
     }
 
     #[test]
+    fn a_peer_that_lists_two_people_crosswise_cannot_outvote_two_honest_robots() {
+        // "0z" ranks first and, from tick 20 on, lists p under q's id and q under p's.
+        let mut robots = [Robot::new("0z"), Robot::new("a"), Robot::new("b")];
+        let (p, q) = ([2.0, 0.0], [2.0, 3.0]);
+        let both = || vec![p, q];
+        for t in 0..20 {
+            tick(&mut robots, t, &[both(), both(), both()]);
+        }
+        let names = |r: &Robot| (r.id_at(p), r.id_at(q));
+        let team = names(&robots[1]);
+        for t in 20..60 {
+            tick(&mut robots, t, &[both(), both(), both()]);
+            for s in robots[0].shared.iter_mut() {
+                s.worker = if Some(s.worker) == team.0 { team.1.unwrap() } else { team.0.unwrap() };
+            }
+            assert!(robots[1..].iter().all(|r| names(r) == team), "tick {t}: the liar renamed them");
+        }
+    }
+
+    #[test]
     fn a_robot_that_joins_takes_the_teams_ids_and_they_outlive_the_robot_that_minted_them() {
         let mut robots = vec![Robot::new("a"), Robot::new("b")];
         let at = |t: u64| [0.1 * t as f32, 1.0];
