@@ -26,6 +26,8 @@ pub struct BenchOptions {
     pub fleet: FleetOptions,
     pub duration: Duration,
     pub scenario: Scenario,
+    /// Workers on the floor (`--workers`).
+    pub workers: usize,
     /// Kill router 0 this long after the measurement starts.
     pub router_down_at: Option<Duration>,
 }
@@ -34,6 +36,8 @@ pub struct BenchOptions {
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
     pub robots: usize,
+    /// Workers on the floor (`--workers`): frames carry everyone in view.
+    pub workers: usize,
     /// Mutual TLS and access control on every link (`--secured`).
     pub secured: bool,
     /// 0: a peer mesh; N: the robots are clients of N routers (`--routers`).
@@ -62,7 +66,7 @@ pub struct BenchReport {
 pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let robots = o.fleet.robots;
     let mut fleet = LoopbackFleet::start(o.fleet.clone()).await?;
-    let mut world = World::new(layout_with_slots(robots), o.scenario, 1, robots);
+    let mut world = World::with_workers(layout_with_slots(robots), o.scenario, 1, robots, o.workers);
     let warmup = Duration::from_secs(2);
     let mut published: BTreeMap<u64, Instant> = BTreeMap::new();
     let (mut cpu0, mut routers_cpu0, mut measure_from) = (Vec::new(), 0.0, None);
@@ -122,6 +126,7 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
     let n = robots as f64;
     Ok(BenchReport {
         robots,
+        workers: o.workers,
         secured: o.fleet.secured,
         routers: o.fleet.routers,
         ticks,
@@ -144,8 +149,9 @@ pub async fn run(o: &BenchOptions) -> Result<BenchReport> {
 
 pub fn print(r: &BenchReport) {
     println!(
-        "{} robots at 10 Hz{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
+        "{} robots at 10 Hz{}{}{}: {} ticks, {:.1} ticks/s · frame → every decision p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms · agreement {:.1}% ({} ticks incomplete) · per agent {:.1}% CPU, {:.1} MB RSS, {:.1} msgs and {:.0} B per tick",
         r.robots,
+        if r.workers > 1 { format!(", {} workers", r.workers) } else { String::new() },
         if r.secured { ", secured" } else { "" },
         match r.routers {
             0 => String::new(),
@@ -181,6 +187,10 @@ pub struct BenchArgs {
     pub duration: Duration,
     #[arg(long, default_value = "3", value_parser = crate::world_args::parse_scenario)]
     pub scenario: spwi_world::world::Scenario,
+    /// Workers on the floor, each with its own work cycle (frames carry everyone in
+    /// view); not in a soak.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=spwi_world::world::MAX_WORKERS as i64))]
+    pub workers: u8,
     /// The spwi-agent binary (default: next to this one).
     #[arg(long)]
     pub agent: Option<PathBuf>,
@@ -226,6 +236,7 @@ pub fn main(a: BenchArgs) -> Result<()> {
         robots,
         duration,
         scenario,
+        workers,
         agent,
         models,
         json,
@@ -249,6 +260,9 @@ pub fn main(a: BenchArgs) -> Result<()> {
     let fleet = FleetOptions { robots: robots as usize, agent, models, secured, agent_cfg, routers: routers as usize };
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     if let Some(duration) = soak {
+        if workers != 1 {
+            anyhow::bail!("--workers {workers} with --soak: a soak runs one worker");
+        }
         let opts = crate::soak::SoakOptions { fleet, duration, churn, freeze_every, scenario };
         let report = rt.block_on(crate::soak::run(&opts))?;
         crate::soak::print(&report);
@@ -258,7 +272,8 @@ pub fn main(a: BenchArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let report = rt.block_on(run(&BenchOptions { fleet, duration, scenario, router_down_at }))?;
+    let report =
+        rt.block_on(run(&BenchOptions { fleet, duration, scenario, workers: usize::from(workers), router_down_at }))?;
     print(&report);
     write_json(json.as_deref(), &report)
 }
