@@ -226,9 +226,9 @@ impl WorkerIds {
     /// Takes the team's name for each of this robot's tracks that the team has named
     /// otherwise for [`CONFORM_TICKS`] ticks in a row. Each robot that places someone
     /// where the track is has a word on who it is: this robot its own id, a peer the id
-    /// it lists there — the track's id if it lists that one within the gate, else the
-    /// one its list gives the track by least total distance over this robot's tracks.
-    /// The id most robots give wins; of ids given by as many, the one the first-ranked
+    /// its list gives the track when its people are assigned to all of this robot's
+    /// tracks by least total distance, each pair within the adoption gate (so that of
+    /// two people side by side each is given its own). The id most robots give wins; of ids given by as many, the one the first-ranked
     /// robot gives (robots ranked by id). A track renamed to an id another track of
     /// ours holds hands that track its old id: two people swapped on one robot's
     /// tracks are swapped back.
