@@ -497,16 +497,24 @@ mod tests {
         }
     }
 
+    /// Robots `names` (ranked by name) that have seen two people, p and q, 3 m apart
+    /// for 2 s: the robots, the places and the names of p and q that robot `of` gives.
+    #[allow(clippy::type_complexity)]
+    fn settled_on_two(names: &[&str], of: usize) -> (Vec<Robot>, [[f32; 2]; 2], (Option<WorkerId>, Option<WorkerId>)) {
+        let mut robots: Vec<Robot> = names.iter().map(|n| Robot::new(n)).collect();
+        let (p, q) = ([2.0, 0.0], [2.0, 3.0]);
+        for t in 0..20 {
+            tick(&mut robots, t, &vec![vec![p, q]; names.len()]);
+        }
+        let team = (robots[of].id_at(p), robots[of].id_at(q));
+        (robots, [p, q], team)
+    }
+
     #[test]
     fn a_robot_whose_tracks_swapped_two_people_takes_the_teams_names_back() {
-        let mut robots = [Robot::new("a"), Robot::new("b"), Robot::new("c")];
-        let (p, q) = ([2.0, 0.0], [2.0, 3.0]);
+        let (mut robots, [p, q], team) = settled_on_two(&["a", "b", "c"], 0);
         let both = || vec![p, q];
-        for t in 0..20 {
-            tick(&mut robots, t, &[both(), both(), both()]);
-        }
         let names = |r: &Robot| (r.id_at(p), r.id_at(q));
-        let team = names(&robots[0]);
         // a, ranked first, swaps: the other two outnumber it, and it takes their names.
         swap_names(&mut robots[0], p, q);
         for t in 20..20 + u64::from(CONFORM_TICKS) {
@@ -521,14 +529,9 @@ mod tests {
 
     #[test]
     fn of_two_robots_that_name_two_people_crosswise_the_second_ranked_takes_the_firsts_names() {
-        let mut robots = [Robot::new("a"), Robot::new("b")];
-        let (p, q) = ([2.0, 0.0], [2.0, 3.0]);
+        let (mut robots, [p, q], team) = settled_on_two(&["a", "b"], 0);
         let both = || vec![p, q];
-        for t in 0..20 {
-            tick(&mut robots, t, &[both(), both()]);
-        }
         let names = |r: &Robot| (r.id_at(p), r.id_at(q));
-        let team = names(&robots[0]);
         swap_names(&mut robots[1], p, q);
         for t in 20..20 + u64::from(CONFORM_TICKS) + 2 {
             tick(&mut robots, t, &[both(), both()]);
@@ -543,14 +546,9 @@ mod tests {
     #[test]
     fn a_peer_that_lists_two_people_crosswise_cannot_outvote_two_honest_robots() {
         // "0z" ranks first and, from tick 20 on, lists p under q's id and q under p's.
-        let mut robots = [Robot::new("0z"), Robot::new("a"), Robot::new("b")];
-        let (p, q) = ([2.0, 0.0], [2.0, 3.0]);
+        let (mut robots, [p, q], team) = settled_on_two(&["0z", "a", "b"], 1);
         let both = || vec![p, q];
-        for t in 0..20 {
-            tick(&mut robots, t, &[both(), both(), both()]);
-        }
         let names = |r: &Robot| (r.id_at(p), r.id_at(q));
-        let team = names(&robots[1]);
         for t in 20..60 {
             tick(&mut robots, t, &[both(), both(), both()]);
             for s in robots[0].shared.iter_mut() {
